@@ -1,0 +1,37 @@
+#pragma once
+/// \file metrics.h
+/// Image error metrics against a reference.
+
+#include "voxcone/image/image.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+namespace voxcone {
+
+/// Errors of a test image against a reference of the same size.
+struct ImageMetrics {
+  /// Relative MSE: mean over pixels and channels of (t - r)^2 / (r^2 + eps), eps = 1e-2
+  /// (the HDR metric of Rousselle et al. 2011 and most denoising studies).
+  double relMse = 0.0;
+  /// Mean squared error of linear values, over pixels and channels.
+  double mse = 0.0;
+  /// PSNR in dB of 8-bit sRGB values (clamped, sRGB OETF, rounded): 10 log10(255^2 / MSE8);
+  /// +infinity for identical 8-bit images.
+  double psnrSrgb8 = 0.0;
+  /// Mean SSIM (Wang et al. 2004, 8x8... see implementation) on the luminance of 8-bit sRGB values.
+  double ssim = 0.0;
+  nlohmann::json toJson() const;
+};
+
+/// epsilon of relMse.
+constexpr double kRelMseEpsilon = 1e-2;
+
+/// Compare; throws ImageError if the sizes differ or either is empty.
+ImageMetrics compareImages(const Image& test, const Image& reference);
+
+/// False-colour map of the per-pixel relative squared error (mean over channels of
+/// (t-r)^2/(r^2+eps)) on a perceptually ordered colour ramp, scaled so that `maxError` maps to
+/// the top of the ramp (maxError <= 0: the 99th percentile of the image).
+Image falseColorError(const Image& test, const Image& reference, double maxError = 0.0);
+
+}  // namespace voxcone

@@ -1,0 +1,63 @@
+#pragma once
+/// \file bsdf.h
+/// Evaluation and importance sampling of every MaterialType.
+///
+/// Conventions (all functions): directions are unit vectors in the local shading frame, z is
+/// the shading normal, both `wo` (towards the viewer / previous vertex) and `wi` (towards the
+/// light / next vertex) point away from the surface.
+/// - Non-transmissive materials are two-sided: if wo.z < 0 the lobe is mirrored to the -z
+///   side (as if the normal were flipped); reflection needs wo.z * wi.z > 0.
+/// - Transmissive materials: +z is the outside, `ior` is inside over outside; wo.z < 0 means
+///   the path arrives from inside.
+/// - Values returned by bsdfEval are f(wo, wi) WITHOUT the cosine factor.
+
+#include "voxcone/core/math.h"
+#include "voxcone/scene/material.h"
+
+namespace voxcone {
+
+/// One sampled direction.
+struct BsdfSample {
+  Vec3 wi{0.0f};        ///< sampled direction (local frame)
+  Vec3 weight{0.0f};    ///< f * |cos(wi)| / pdf (for delta lobes: the lobe's weight)
+  float pdf = 0.0f;     ///< solid-angle density; for delta lobes the discrete probability of the lobe
+  bool delta = false;   ///< true when sampled from a Dirac lobe
+  bool transmission = false;
+  float eta = 1.0f;     ///< relative IOR crossed (1 for reflection); for Russian roulette scaling
+};
+
+/// f(wo, wi) (no cosine). Zero for delta materials.
+Vec3 bsdfEval(const Material& m, const Vec3& wo, const Vec3& wi, TransportMode mode = TransportMode::Radiance);
+
+/// Solid-angle pdf of bsdfSample producing wi from wo. Zero for delta materials.
+float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi);
+
+/// Sample wi given wo with uc, u uniform in [0,1). Returns false when no direction results
+/// (e.g. wo grazing, sample below the horizon).
+bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, BsdfSample& out,
+                TransportMode mode = TransportMode::Radiance);
+
+/// A deterministic lobe of a delta material (for Whitted-style splitting).
+struct DeltaLobe {
+  Vec3 wi{0.0f};
+  Vec3 weight{0.0f};  ///< f * |cos| / delta: the factor the incoming radiance is multiplied by
+  bool transmission = false;
+};
+
+/// Enumerate the delta lobes of `m` for wo: mirror and conductor give one reflection; a
+/// dielectric gives reflection (weight F) and refraction (weight 1-F, /eta^2 for radiance),
+/// or only reflection under total internal reflection. Returns the number written (<= 2).
+int bsdfDeltaLobes(const Material& m, const Vec3& wo, DeltaLobe out[2], TransportMode mode = TransportMode::Radiance);
+
+/// Unpolarized Fresnel reflectance of a dielectric interface; cosThetaI in [-1,1] (negative =
+/// arriving from inside), eta = inside/outside. 1 under total internal reflection.
+float fresnelDielectric(float cosThetaI, float eta);
+
+/// Unpolarized Fresnel reflectance of a conductor with complex IOR eta + i k, per channel.
+Vec3 fresnelConductor(float cosThetaI, const Vec3& eta, const Vec3& k);
+
+/// Albedo-like reflectance used to choose photon survival / to report a material's
+/// diffuse reflectance (albedo for diffuse, 0 otherwise).
+inline Vec3 diffuseReflectance(const Material& m) { return m.isDiffuse() ? m.albedo : Vec3(0.0f); }
+
+}  // namespace voxcone

@@ -1,0 +1,130 @@
+#pragma once
+/// \file scene.h
+/// The immutable scene: world-space triangles, materials, lights, camera and render settings.
+/// It knows nothing of accelerators (accel/ builds those from it).
+
+#include "voxcone/core/bounds.h"
+#include "voxcone/core/ray.h"
+#include "voxcone/scene/camera.h"
+#include "voxcone/scene/material.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace voxcone {
+
+/// A point light: radiant intensity in W/sr per channel.
+struct PointLight {
+  Vec3 position{0.0f};
+  Vec3 intensity{0.0f};
+};
+
+/// Settings a scene file may give and the command line may override.
+struct RenderSettings {
+  int width = 256;
+  int height = 256;
+  int spp = 16;            ///< samples per pixel, >= 1
+  int maxDepth = 16;       ///< longest path (number of segments) for path / recursion for whitted
+  uint64_t seed = 0;
+  std::string method = "path";
+  /// Throws SettingsError naming the offending value.
+  void validate() const;
+};
+
+/// A named group of triangles as given in the scene file (a quad or a mesh).
+struct ShapeInfo {
+  std::string name;
+  uint32_t firstTriangle = 0;
+  uint32_t triangleCount = 0;
+  bool smoothNormals = false;
+};
+
+/// A light sample towards a shading point.
+struct LightSample {
+  Vec3 radiance{0.0f};   ///< Le (area) or I/r^2 (point) arriving along -wi, before visibility
+  Vec3 wi{0.0f};         ///< unit direction from the shading point to the light
+  Vec3 lightPos{0.0f};   ///< sampled point on the light
+  Vec3 lightNormal{0.0f};///< geometric normal there (zero for point lights)
+  float distance = 0.0f;
+  float pdf = 0.0f;      ///< solid-angle pdf (including the light choice); 0 = failed
+  bool delta = false;    ///< point light (cannot be hit by BSDF sampling)
+};
+
+/// The surface at a ray hit.
+struct SurfaceHit {
+  Vec3 position{0.0f};
+  Vec3 geomNormal{0.0f};   ///< unit, from the winding: normalize(cross(v1-v0, v2-v0))
+  Vec3 shadingNormal{0.0f};///< unit; the geometric one for flat shading
+  uint32_t triangle = 0;
+  uint32_t material = 0;
+};
+
+/// World-space scene. Built by the loaders; immutable afterwards.
+class Scene {
+public:
+  // Geometry, flattened over all shapes.
+  std::vector<Vec3> positions;
+  std::vector<Vec3> normals;           ///< per vertex, or empty when no shape is smooth
+  std::vector<UVec3> triangles;
+  std::vector<uint32_t> triMaterial;   ///< per triangle index into materials
+  std::vector<uint32_t> triShape;      ///< per triangle index into shapes
+  std::vector<ShapeInfo> shapes;
+  std::vector<Material> materials;
+  std::vector<PointLight> pointLights;
+  Camera camera;
+  RenderSettings render;
+  std::string sourcePath;              ///< file the scene came from (for messages and sidecars)
+
+  /// Precompute the light distribution and bounds; call once after filling the fields.
+  void finalize();
+
+  size_t triangleCount() const { return triangles.size(); }
+  const Bounds3& bounds() const { return m_bounds; }
+  /// Bounding sphere of the scene bounds.
+  Sphere boundingSphere() const;
+
+  /// Surface data at barycentrics (b1, b2) of `triangle` hit at `position`.
+  SurfaceHit surfaceAt(uint32_t triangle, const Vec3& position, float b1, float b2) const;
+
+  /// Emitted radiance leaving an emissive surface towards direction `w` (unit, pointing away).
+  Vec3 emitted(const SurfaceHit& hit, const Vec3& w) const;
+
+  // Lights. Every emissive triangle and every point light is one light; one is chosen in
+  // proportion to its power (luminance of emitted flux).
+  size_t lightCount() const { return m_lightCdf.size(); }
+  bool hasLights() const { return !m_lightCdf.empty(); }
+  /// Sample a light towards `ref` with uc (light choice) and u (point on it).
+  LightSample sampleLight(const Vec3& ref, float uc, const Vec2& u) const;
+  /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
+  float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
+  /// Total emitted power (W, luminance), for photon emission in part 2.
+  float totalLightPower() const { return m_totalPower; }
+  /// Triangle area in scene units squared.
+  float triangleArea(uint32_t triangle) const;
+  /// Number of emissive triangles.
+  size_t emissiveTriangleCount() const { return m_emissiveTris.size(); }
+
+  /// Summary statistics as JSON (counts, bounds).
+  nlohmann::json statsJson() const;
+
+private:
+  Bounds3 m_bounds;
+  std::vector<uint32_t> m_emissiveTris;    ///< light index i < size: triangle id
+  std::vector<float> m_lightCdf;           ///< cumulative power, normalized; lights are
+                                           ///< [emissive triangles..., point lights...]
+  std::vector<float> m_lightPmf;
+  std::vector<int32_t> m_triLightIndex;    ///< per triangle: light index or -1
+  float m_totalPower = 0.0f;
+};
+
+/// Load a scene from a JSON file (see README "Scene format"). Relative mesh paths are resolved
+/// against the scene file's folder. Throws SceneError naming the file and JSON path.
+Scene loadScene(const std::string& path);
+
+/// Parse a scene from JSON text; `origin` names it in errors; `baseDir` resolves mesh paths.
+Scene parseScene(const std::string& jsonText, const std::string& origin, const std::string& baseDir);
+
+}  // namespace voxcone
