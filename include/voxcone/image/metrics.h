@@ -18,7 +18,9 @@ struct ImageMetrics {
   /// PSNR in dB of 8-bit sRGB values (clamped, sRGB OETF, rounded): 10 log10(255^2 / MSE8);
   /// +infinity for identical 8-bit images.
   double psnrSrgb8 = 0.0;
-  /// Mean SSIM (Wang et al. 2004, 8x8... see implementation) on the luminance of 8-bit sRGB values.
+  /// Mean SSIM (Wang et al. 2004: 11x11 Gaussian window, sigma 1.5, K1 0.01, K2 0.03, L 255) over
+  /// every window position inside the image, on the Rec. 709 luma of the 8-bit sRGB codes
+  /// (weights applied to code values). Images under 11 pixels on an axis use min(11, size) taps.
   double ssim = 0.0;
   nlohmann::json toJson() const;
 };

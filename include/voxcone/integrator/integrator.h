@@ -1,0 +1,73 @@
+#pragma once
+/// \file integrator.h
+/// The integrator interface, the registry of integrators by name (Tungsten's
+/// IntegratorFactory), and the tile-parallel render driver.
+
+#include "voxcone/core/progress.h"
+#include "voxcone/core/rng.h"
+#include "voxcone/image/image.h"
+#include "voxcone/scene/scene.h"
+
+#include <nlohmann/json.hpp>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace voxcone {
+
+class Hbvh;
+
+/// Estimates the radiance arriving along camera rays. Implementations are immutable while
+/// rendering (`li` is called concurrently); per-render work happens in `prepare`.
+class Integrator {
+public:
+  virtual ~Integrator() = default;
+  /// Registered name ("path", "whitted", ...).
+  virtual std::string name() const = 0;
+  /// One-time work before rendering (photon tracing, voxelization in later parts).
+  virtual void prepare(Progress* progress) {}
+  /// Radiance along `ray` (a camera ray); `rng` is this pixel's random stream.
+  virtual Vec3 li(const Ray& ray, Rng& rng) const = 0;
+  /// Settings as JSON (written into sidecars).
+  virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
+  /// Statistics gathered in prepare/li, as JSON.
+  virtual nlohmann::json statsJson() const { return nlohmann::json::object(); }
+};
+
+/// What an integrator is built from. `options` are integrator-specific settings; every key an
+/// integrator does not read is an error (unused settings are reported, as pbrt-v4 does).
+struct IntegratorContext {
+  const Scene& scene;
+  const Hbvh& accel;
+  RenderSettings settings;
+  nlohmann::json options = nlohmann::json::object();
+};
+
+using IntegratorFactory = std::function<std::unique_ptr<Integrator>(const IntegratorContext&)>;
+
+/// Register a factory under `name` (called from each integrator's translation unit through
+/// the table in registry.cpp).
+void registerIntegrator(const std::string& name, IntegratorFactory factory);
+/// Create the integrator `name`; throws SettingsError for an unknown name or bad options.
+std::unique_ptr<Integrator> createIntegrator(const std::string& name, const IntegratorContext& context);
+/// The registered names, sorted.
+std::vector<std::string> integratorNames();
+
+/// Output of render().
+struct RenderResult {
+  Image image;
+  double seconds = 0.0;       ///< wall time of the pixel loop
+  uint64_t samples = 0;       ///< camera samples taken
+  uint64_t invalidSamples = 0;///< NaN/inf estimates dropped (should be 0)
+};
+
+/// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its random numbers
+/// from Rng(settings.seed, y * width + x), so the image is bit-identical at any thread count.
+/// Box pixel filter: each sample is uniform in the pixel's square. Throws CancelledError when
+/// `progress` reports cancellation.
+RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                         Progress* progress = nullptr);
+
+}  // namespace voxcone

@@ -1,0 +1,32 @@
+#pragma once
+/// \file whitted.h
+/// Whitted-style ray tracing (Whitted 1980): direct light with shadow rays at non-delta
+/// surfaces, recursive specular reflection and refraction at delta surfaces, no diffuse
+/// interreflection. The exact-hit skeleton the voxel-cone integrator extends.
+
+#include "voxcone/integrator/integrator.h"
+
+namespace voxcone {
+
+/// Whitted integrator. Options: `light_samples` (shadow rays per shading point, default 1).
+class WhittedIntegrator final : public Integrator {
+public:
+  explicit WhittedIntegrator(const IntegratorContext& context);
+  std::string name() const override { return "whitted"; }
+  Vec3 li(const Ray& ray, Rng& rng) const override;
+  nlohmann::json settingsJson() const override;
+
+private:
+  Vec3 trace(const Ray& ray, Rng& rng, int depth) const;
+  const Scene& m_scene;
+  const Hbvh& m_accel;
+  int m_maxDepth;
+  int m_lightSamples = 1;
+};
+
+/// Direct light at a non-delta surface by light sampling only (no MIS): one estimate with
+/// `samples` shadow rays. wo is the unit direction towards the viewer (world space).
+Vec3 estimateDirectLight(const Scene& scene, const Hbvh& accel, const SurfaceHit& hit, const Vec3& wo, Rng& rng,
+                         int samples);
+
+}  // namespace voxcone

@@ -1,0 +1,326 @@
+// HBVH construction: top-down binned SAH (Wald 2007, "On fast Construction of SAH-based
+// Bounding Volume Hierarchies"), subtrees built in parallel with TBB, then flattened depth
+// first. The tree is the same at any thread count: partitions are deterministic and subtrees
+// are joined by position, not by completion order.
+
+#include "voxcone/accel/hbvh.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/core/timer.h"
+#include "voxcone/scene/scene.h"
+
+#include <nlohmann/json.hpp>
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/blocked_range.h>
+
+#include <algorithm>
+#include <array>
+#include <memory>
+
+namespace voxcone {
+
+namespace {
+
+/// A triangle's bounds and centroid during the build.
+struct PrimRef {
+  Bounds3 box;
+  Vec3 centroid;
+  uint32_t id;
+};
+
+struct BuildNode {
+  Bounds3 box;
+  Sphere sphere;
+  bool hasSphere = false;
+  uint32_t first = 0, count = 0;  // leaf range in the ref array
+  std::unique_ptr<BuildNode> left, right;
+  bool leaf() const { return !left; }
+};
+
+constexpr int kMaxDepth = 60;  // traversal stacks hold 64 entries
+
+class Builder {
+public:
+  Builder(const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, const HbvhBuildSettings& s, Progress* p)
+      : m_pos(pos), m_tris(tris), m_s(s), m_progress(p) {}
+
+  std::vector<PrimRef> refs;
+
+  std::unique_ptr<BuildNode> build(uint32_t begin, uint32_t end, int depth) {
+    auto node = std::make_unique<BuildNode>();
+    const auto [box, cbox] = rangeBounds(begin, end);
+    node->box = box;
+    const uint32_t count = end - begin;
+    if (m_s.sphereAreaRatio > 0.0f) computeSphere(*node, begin, end);
+
+    const float leafCost = m_s.intersectionCost * static_cast<float>(count);
+    int bestAxis = -1, bestSplit = -1;
+    float bestCost = kInf;
+    if (count > 1 && depth < kMaxDepth) findSplit(begin, end, box, cbox, bestAxis, bestSplit, bestCost);
+
+    const bool mustSplit = count > static_cast<uint32_t>(m_s.maxLeafSize) && depth < kMaxDepth;
+    if (count == 1 || depth >= kMaxDepth || (!mustSplit && leafCost <= bestCost)) {
+      makeLeaf(*node, begin, end);
+      return node;
+    }
+    uint32_t mid;
+    if (bestAxis >= 0) {
+      const int bins = m_s.binCount;
+      const float lo = cbox.lo[bestAxis];
+      const float scale = static_cast<float>(bins) / (cbox.hi[bestAxis] - lo);
+      auto it = std::partition(refs.begin() + begin, refs.begin() + end, [&](const PrimRef& r) {
+        return binOf(r.centroid[bestAxis], lo, scale, bins) < bestSplit;
+      });
+      mid = static_cast<uint32_t>(it - refs.begin());
+    } else {
+      // Every centroid coincides (or no split helps yet the leaf would be too big): split the
+      // range in its middle, ordered by the largest centroid axis for a stable result.
+      const int axis = maxDimension(cbox.diagonal());
+      mid = begin + count / 2;
+      std::nth_element(refs.begin() + begin, refs.begin() + mid, refs.begin() + end,
+                       [axis](const PrimRef& a, const PrimRef& b) {
+                         return a.centroid[axis] < b.centroid[axis] || (a.centroid[axis] == b.centroid[axis] && a.id < b.id);
+                       });
+    }
+    if (mid == begin || mid == end) mid = begin + count / 2;
+
+    if (count >= static_cast<uint32_t>(m_s.parallelThreshold)) {
+      tbb::parallel_invoke([&] { node->left = build(begin, mid, depth + 1); },
+                           [&] { node->right = build(mid, end, depth + 1); });
+    } else {
+      node->left = build(begin, mid, depth + 1);
+      node->right = build(mid, end, depth + 1);
+    }
+    return node;
+  }
+
+private:
+  static int binOf(float c, float lo, float scale, int bins) {
+    const int b = static_cast<int>((c - lo) * scale);
+    return std::clamp(b, 0, bins - 1);
+  }
+
+  std::pair<Bounds3, Bounds3> rangeBounds(uint32_t begin, uint32_t end) const {
+    using Pair = std::pair<Bounds3, Bounds3>;
+    auto body = [&](const tbb::blocked_range<uint32_t>& r, Pair acc) {
+      for (uint32_t i = r.begin(); i < r.end(); ++i) {
+        acc.first.extend(refs[i].box);
+        acc.second.extend(refs[i].centroid);
+      }
+      return acc;
+    };
+    if (end - begin < 65536u) return body(tbb::blocked_range<uint32_t>(begin, end), Pair());
+    return tbb::parallel_reduce(tbb::blocked_range<uint32_t>(begin, end, 16384), Pair(), body,
+                                [](Pair a, const Pair& b) {
+                                  a.first.extend(b.first);
+                                  a.second.extend(b.second);
+                                  return a;
+                                });
+  }
+
+  /// Binned SAH over the three axes: the split plane of least cost.
+  void findSplit(uint32_t begin, uint32_t end, const Bounds3& box, const Bounds3& cbox, int& bestAxis,
+                 int& bestSplit, float& bestCost) const {
+    const int bins = m_s.binCount;
+    const float invArea = 1.0f / std::max(box.area(), 1e-30f);
+    struct Bin {
+      Bounds3 box;
+      uint32_t count = 0;
+    };
+    for (int axis = 0; axis < 3; ++axis) {
+      const float lo = cbox.lo[axis], extent = cbox.hi[axis] - lo;
+      if (!(extent > 0.0f)) continue;
+      const float scale = static_cast<float>(bins) / extent;
+      std::array<Bin, 256> bin{};
+      for (uint32_t i = begin; i < end; ++i) {
+        Bin& b = bin[binOf(refs[i].centroid[axis], lo, scale, bins)];
+        b.box.extend(refs[i].box);
+        ++b.count;
+      }
+      // Sweep from the right to get the right-hand areas, then from the left.
+      std::array<float, 256> rightArea{};
+      std::array<uint32_t, 256> rightCount{};
+      Bounds3 acc;
+      uint32_t n = 0;
+      for (int i = bins - 1; i > 0; --i) {
+        acc.extend(bin[i].box);
+        n += bin[i].count;
+        rightArea[i] = acc.area();
+        rightCount[i] = n;
+      }
+      acc = Bounds3();
+      n = 0;
+      for (int i = 1; i < bins; ++i) {
+        acc.extend(bin[i - 1].box);
+        n += bin[i - 1].count;
+        if (n == 0 || rightCount[i] == 0) continue;
+        const float cost = m_s.traversalCost +
+                           m_s.intersectionCost * invArea * (acc.area() * n + rightArea[i] * rightCount[i]);
+        if (cost < bestCost) {
+          bestCost = cost;
+          bestAxis = axis;
+          bestSplit = i;
+        }
+      }
+    }
+  }
+
+  /// Sphere centred on the vertices' box; kept when its area is small enough against the AABB's.
+  void computeSphere(BuildNode& node, uint32_t begin, uint32_t end) const {
+    const Vec3 c = node.box.center();
+    float r2 = 0.0f;
+    for (uint32_t i = begin; i < end; ++i) {
+      const UVec3& t = m_tris[refs[i].id];
+      r2 = std::max({r2, glm::dot(m_pos[t.x] - c, m_pos[t.x] - c), glm::dot(m_pos[t.y] - c, m_pos[t.y] - c),
+                     glm::dot(m_pos[t.z] - c, m_pos[t.z] - c)});
+    }
+    // Inflate by a relative 1e-5 so that float rounding in the ray-sphere test never culls a
+    // triangle the AABB test would keep.
+    node.sphere.center = c;
+    node.sphere.radius = std::sqrt(r2) * (1.0f + 1e-5f) + 1e-30f;
+    node.hasSphere = node.sphere.area() < m_s.sphereAreaRatio * node.box.area();
+  }
+
+  void makeLeaf(BuildNode& node, uint32_t begin, uint32_t end) {
+    node.first = begin;
+    node.count = end - begin;
+    if (m_progress) m_progress->advance(node.count);
+  }
+
+  const std::vector<Vec3>& m_pos;
+  const std::vector<UVec3>& m_tris;
+  const HbvhBuildSettings& m_s;
+  Progress* m_progress;
+};
+
+}  // namespace
+
+nlohmann::json HbvhStats::toJson() const {
+  nlohmann::json j;
+  j["triangles"] = triangles;
+  j["nodes"] = nodes;
+  j["leaves"] = leaves;
+  j["sphere_nodes"] = sphereNodes;
+  j["max_depth"] = maxDepth;
+  j["sah_cost"] = sahCost;
+  j["avg_leaf_size"] = avgLeafSize;
+  j["bytes"] = bytes;
+  j["build_seconds"] = buildSeconds;
+  return j;
+}
+
+Hbvh::Hbvh(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, const HbvhBuildSettings& settings,
+           Progress* progress)
+    : m_settings(settings) {
+  build(positions, triangles, progress);
+}
+
+Hbvh::Hbvh(const Scene& scene, const HbvhBuildSettings& settings, Progress* progress) : m_settings(settings) {
+  build(scene.positions, scene.triangles, progress);
+}
+
+Bounds3 Hbvh::bounds() const {
+  if (m_nodes.empty()) return Bounds3();
+  return Bounds3(m_nodes[0].lo, m_nodes[0].hi);
+}
+
+void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
+  const HbvhBuildSettings& s = m_settings;
+  if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
+  if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
+  if (triangles.size() >= (1u << 31)) throw SettingsError("HBVH: too many triangles");
+  Timer timer;
+  Builder builder(positions, triangles, s, progress);
+
+  // References for every triangle with finite, indexable vertices.
+  builder.refs.reserve(triangles.size());
+  for (uint32_t i = 0; i < triangles.size(); ++i) {
+    const UVec3& t = triangles[i];
+    if (t.x >= positions.size() || t.y >= positions.size() || t.z >= positions.size()) continue;
+    PrimRef r;
+    r.box.extend(positions[t.x]);
+    r.box.extend(positions[t.y]);
+    r.box.extend(positions[t.z]);
+    if (!isFinite(r.box.lo) || !isFinite(r.box.hi)) continue;
+    r.centroid = r.box.center();
+    r.id = i;
+    builder.refs.push_back(r);
+  }
+  if (progress) progress->start("hbvh", builder.refs.size());
+  m_nodes.clear();
+  m_spheres.clear();
+  m_triVerts.clear();
+  m_triIds.clear();
+  m_stats = HbvhStats();
+  m_stats.triangles = builder.refs.size();
+  if (builder.refs.empty()) {
+    if (progress) progress->finish();
+    m_stats.buildSeconds = timer.seconds();
+    return;
+  }
+  std::unique_ptr<BuildNode> root = builder.build(0, static_cast<uint32_t>(builder.refs.size()), 0);
+
+  // Flatten depth first: the left child follows its parent; leaves get consecutive slots.
+  m_triVerts.reserve(3 * builder.refs.size());
+  m_triIds.reserve(builder.refs.size());
+  const float rootArea = std::max(root->box.area(), 1e-30f);
+  struct Item {
+    const BuildNode* node;
+    uint32_t parent;  // index of the parent whose right child this is, or UINT32_MAX
+    int depth;
+  };
+  std::vector<Item> stack{{root.get(), UINT32_MAX, 1}};
+  while (!stack.empty()) {
+    const Item it = stack.back();
+    stack.pop_back();
+    const uint32_t idx = static_cast<uint32_t>(m_nodes.size());
+    if (it.parent != UINT32_MAX) m_nodes[it.parent].offset = idx;
+    const BuildNode& bn = *it.node;
+    Node n{};
+    n.lo = bn.box.lo;
+    n.hi = bn.box.hi;
+    m_stats.maxDepth = std::max(m_stats.maxDepth, it.depth);
+    const float relArea = bn.box.area() / rootArea;
+    if (bn.leaf()) {
+      n.offset = static_cast<uint32_t>(m_triIds.size());
+      n.count = bn.count;
+      for (uint32_t i = bn.first; i < bn.first + bn.count; ++i) {
+        const uint32_t id = builder.refs[i].id;
+        m_triIds.push_back(id);
+        m_triVerts.push_back(positions[triangles[id].x]);
+        m_triVerts.push_back(positions[triangles[id].y]);
+        m_triVerts.push_back(positions[triangles[id].z]);
+      }
+      ++m_stats.leaves;
+      m_stats.sahCost += relArea * s.intersectionCost * bn.count;
+    } else {
+      n.offset = 0;  // patched when the right child is emitted
+      n.count = 0;
+      m_stats.sahCost += relArea * s.traversalCost;
+      stack.push_back({bn.right.get(), idx, it.depth + 1});
+      stack.push_back({bn.left.get(), UINT32_MAX, it.depth + 1});
+    }
+    if (bn.hasSphere) {
+      n.count |= kSphereBit;
+      ++m_stats.sphereNodes;
+    }
+    m_nodes.push_back(n);
+    m_spheres.emplace_back(bn.sphere.center, bn.sphere.radius);
+  }
+  // Spheres are only stored when some node uses them.
+  if (m_stats.sphereNodes == 0) {
+    m_spheres.clear();
+    m_spheres.shrink_to_fit();
+  }
+  m_stats.nodes = m_nodes.size();
+  m_stats.avgLeafSize = m_stats.leaves ? double(m_triIds.size()) / double(m_stats.leaves) : 0.0;
+  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_triVerts.size() * sizeof(Vec3) +
+                  m_triIds.size() * sizeof(uint32_t);
+  // Free the build tree in parallel-friendly order before timing stops.
+  root.reset();
+  m_stats.buildSeconds = timer.seconds();
+  if (progress) progress->finish();
+}
+
+}  // namespace voxcone

@@ -1,0 +1,12 @@
+#pragma once
+// The `voxcone` subcommands: each file adds one to the CLI11 app.
+
+#include <CLI/CLI.hpp>
+
+namespace voxcone {
+
+void addRenderCommand(CLI::App& app);
+void addCompareCommand(CLI::App& app);
+void addInfoCommand(CLI::App& app);
+
+}  // namespace voxcone

@@ -1,0 +1,42 @@
+#pragma once
+// Reading integrator options with unused-key reporting (private to src/integrator).
+
+#include "voxcone/core/error.h"
+
+#include <nlohmann/json.hpp>
+
+#include <set>
+#include <string>
+
+namespace voxcone {
+
+/// Reads integer options of one integrator and reports any key it did not read.
+class OptionReader {
+public:
+  OptionReader(const nlohmann::json& options, std::string integrator)
+      : m_options(options), m_integrator(std::move(integrator)) {
+    if (!m_options.is_object()) throw SettingsError(m_integrator + ": options must be a JSON object");
+  }
+  int integer(const std::string& key, int def, int lo, int hi) {
+    if (!m_options.contains(key)) return def;
+    m_used.insert(key);
+    const auto& v = m_options.at(key);
+    if (!v.is_number_integer()) throw SettingsError(m_integrator + "." + key + ": expected an integer");
+    const auto i = v.get<int64_t>();
+    if (i < lo || i > hi)
+      throw SettingsError(m_integrator + "." + key + ": value " + std::to_string(i) + " out of range [" +
+                          std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    return static_cast<int>(i);
+  }
+  void finish() const {
+    for (auto it = m_options.begin(); it != m_options.end(); ++it)
+      if (!m_used.count(it.key())) throw SettingsError(m_integrator + "." + it.key() + ": unknown option");
+  }
+
+private:
+  const nlohmann::json& m_options;
+  std::string m_integrator;
+  std::set<std::string> m_used;
+};
+
+}  // namespace voxcone

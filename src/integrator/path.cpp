@@ -1,0 +1,90 @@
+#include "voxcone/integrator/path.h"
+
+#include "options.h"
+#include "voxcone/accel/hbvh.h"
+#include "voxcone/core/sampling.h"
+#include "voxcone/scene/bsdf.h"
+
+namespace voxcone {
+
+PathIntegrator::PathIntegrator(const IntegratorContext& c)
+    : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth) {
+  OptionReader r(c.options, "path");
+  m_rrDepth = r.integer("rr_depth", 3, 0, 1024);
+  r.finish();
+}
+
+nlohmann::json PathIntegrator::settingsJson() const { return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}}; }
+
+Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
+  Vec3 L(0.0f), beta(1.0f);
+  Ray ray = cameraRay;
+  bool specularBounce = true;  // the camera vertex acts as a delta
+  float prevPdf = 0.0f;        // solid-angle pdf of the BSDF sample that made `ray`
+  Vec3 prevPos(0.0f);
+  float etaScale = 1.0f;       // removes radiance's 1/eta^2 from the roulette weight
+
+  for (int depth = 0;; ++depth) {
+    const std::optional<Hit> hit = m_accel.intersect(ray);
+    if (!hit) break;
+    const Vec3 pos = ray.at(hit->t);
+    const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    const Vec3 woWorld = -glm::normalize(ray.dir);
+
+    // Emission found by BSDF sampling, MIS-weighted against light sampling.
+    const Vec3 Le = m_scene.emitted(sh, woWorld);
+    if (!isBlack(Le)) {
+      if (specularBounce) {
+        L += beta * Le;
+      } else {
+        const float lightPdf = m_scene.lightPdf(prevPos, sh.triangle, pos, sh.geomNormal);
+        L += beta * Le * powerHeuristic(prevPdf, lightPdf);
+      }
+    }
+    if (depth + 1 >= m_maxDepth) break;
+
+    const Material& mat = m_scene.materials[sh.material];
+    const Frame frame(sh.shadingNormal);
+    const Vec3 wo = frame.toLocal(woWorld);
+
+    // Next-event estimation: one light sample, MIS-weighted against BSDF sampling.
+    if (!mat.isDelta()) {
+      const float uc = rng.uniform();
+      const Vec2 ul = rng.uniform2();
+      const LightSample ls = m_scene.sampleLight(pos, uc, ul);
+      if (ls.pdf > 0.0f) {
+        const Vec3 wi = frame.toLocal(ls.wi);
+        const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
+        if (!isBlack(f) && !m_accel.occluded(spawnRayTo(pos, sh.geomNormal, ls.lightPos))) {
+          const float w = ls.delta ? 1.0f : powerHeuristic(ls.pdf, bsdfPdf(mat, wo, wi));
+          L += beta * f * ls.radiance * (w / ls.pdf);
+        }
+      }
+    }
+
+    // Continue the path by sampling the BSDF.
+    BsdfSample bs;
+    const float uc = rng.uniform();
+    const Vec2 u = rng.uniform2();
+    if (!bsdfSample(mat, wo, uc, u, bs) || isBlack(bs.weight)) break;
+    beta *= bs.weight;
+    specularBounce = bs.delta;
+    prevPdf = bs.pdf;
+    prevPos = pos;
+    if (bs.transmission) etaScale *= sqr(bs.eta);
+    const Vec3 wiWorld = frame.toWorld(bs.wi);
+    ray = spawnRay(pos, sh.geomNormal, wiWorld);
+
+    // Russian roulette on the throughput without the radiance scaling of refraction
+    // (pbrt-v4, PathIntegrator::Li).
+    const Vec3 rrBeta = beta * etaScale;
+    if (depth >= m_rrDepth && maxComponent(rrBeta) < 1.0f) {
+      const float q = std::max(0.0f, 1.0f - maxComponent(rrBeta));
+      if (rng.uniform() < q) break;
+      beta /= 1.0f - q;
+    }
+  }
+  return L;
+}
+
+}  // namespace voxcone

@@ -1,0 +1,169 @@
+#include "voxcone/scene/scene.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/core/sampling.h"
+
+#include <nlohmann/json.hpp>
+
+namespace voxcone {
+
+void RenderSettings::validate() const {
+  if (width < 1 || height < 1 || width > 32768 || height > 32768)
+    throw SettingsError("resolution must be between 1x1 and 32768x32768, got " + std::to_string(width) + "x" +
+                        std::to_string(height));
+  if (spp < 1) throw SettingsError("spp must be >= 1, got " + std::to_string(spp));
+  if (maxDepth < 1 || maxDepth > 1024) throw SettingsError("max depth must be in [1, 1024], got " + std::to_string(maxDepth));
+}
+
+float Scene::triangleArea(uint32_t t) const {
+  const UVec3& tri = triangles[t];
+  return 0.5f * glm::length(glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]));
+}
+
+void Scene::finalize() {
+  m_bounds = Bounds3();
+  for (const Vec3& p : positions) m_bounds.extend(p);
+
+  // Lights: emissive triangles then point lights, chosen in proportion to emitted power.
+  m_emissiveTris.clear();
+  m_triLightIndex.assign(triangles.size(), -1);
+  std::vector<float> power;
+  for (uint32_t t = 0; t < triangles.size(); ++t) {
+    const Material& m = materials[triMaterial[t]];
+    if (!m.isEmissive()) continue;
+    const float area = triangleArea(t);
+    if (!(area > 0.0f)) continue;
+    // Flux of a Lambertian emitter: pi * L * A per side.
+    const float flux = kPi * luminance(m.emission) * area * (m.twoSidedEmission ? 2.0f : 1.0f);
+    if (!(flux > 0.0f)) continue;
+    m_triLightIndex[t] = static_cast<int32_t>(m_emissiveTris.size());
+    m_emissiveTris.push_back(t);
+    power.push_back(flux);
+  }
+  for (const PointLight& pl : pointLights) power.push_back(4.0f * kPi * std::max(0.0f, luminance(pl.intensity)));
+
+  double total = 0.0;
+  for (float p : power) total += p;
+  m_totalPower = static_cast<float>(total);
+  m_lightCdf.resize(power.size());
+  m_lightPmf.resize(power.size());
+  double acc = 0.0;
+  for (size_t i = 0; i < power.size(); ++i) {
+    acc += power[i];
+    m_lightPmf[i] = total > 0.0 ? static_cast<float>(power[i] / total) : 0.0f;
+    m_lightCdf[i] = total > 0.0 ? static_cast<float>(acc / total) : 0.0f;
+  }
+  if (!m_lightCdf.empty()) m_lightCdf.back() = 1.0f;
+}
+
+Sphere Scene::boundingSphere() const {
+  Sphere s;
+  if (m_bounds.empty()) return s;
+  s.center = m_bounds.center();
+  s.radius = 0.5f * glm::length(m_bounds.diagonal());
+  return s;
+}
+
+SurfaceHit Scene::surfaceAt(uint32_t triangle, const Vec3& position, float b1, float b2) const {
+  SurfaceHit h;
+  const UVec3& tri = triangles[triangle];
+  const Vec3& p0 = positions[tri.x];
+  h.position = position;
+  h.triangle = triangle;
+  h.material = triMaterial[triangle];
+  h.geomNormal = glm::normalize(glm::cross(positions[tri.y] - p0, positions[tri.z] - p0));
+  h.shadingNormal = h.geomNormal;
+  if (!normals.empty() && shapes[triShape[triangle]].smoothNormals) {
+    const Vec3 n = (1.0f - b1 - b2) * normals[tri.x] + b1 * normals[tri.y] + b2 * normals[tri.z];
+    const float len = glm::length(n);
+    if (len > 0.0f && std::isfinite(len)) {
+      h.shadingNormal = n / len;
+      // Keep the shading normal on the geometric normal's side (winding decides the front).
+      if (glm::dot(h.shadingNormal, h.geomNormal) < 0.0f) h.shadingNormal = -h.shadingNormal;
+    }
+  }
+  return h;
+}
+
+Vec3 Scene::emitted(const SurfaceHit& hit, const Vec3& w) const {
+  const Material& m = materials[hit.material];
+  if (!m.isEmissive()) return Vec3(0.0f);
+  const float c = glm::dot(hit.geomNormal, w);
+  if (c > 0.0f || (m.twoSidedEmission && c < 0.0f)) return m.emission;
+  return Vec3(0.0f);
+}
+
+LightSample Scene::sampleLight(const Vec3& ref, float uc, const Vec2& u) const {
+  LightSample ls;
+  if (m_lightCdf.empty()) return ls;
+  // Choose a light by power (binary search in the CDF).
+  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_lightCdf.begin(), m_lightCdf.end(), uc) -
+                                                  m_lightCdf.begin()),
+                              m_lightCdf.size() - 1);
+  const float pmf = m_lightPmf[idx];
+  if (!(pmf > 0.0f)) return ls;
+  if (idx < m_emissiveTris.size()) {
+    // Uniform point on the emissive triangle, converted to a solid-angle density at ref.
+    const uint32_t t = m_emissiveTris[idx];
+    const UVec3& tri = triangles[t];
+    const Vec2 b = sampleUniformTriangle(u);
+    const Vec3& p0 = positions[tri.x];
+    const Vec3& p1 = positions[tri.y];
+    const Vec3& p2 = positions[tri.z];
+    const Vec3 p = (1.0f - b.x - b.y) * p0 + b.x * p1 + b.y * p2;
+    const Vec3 cr = glm::cross(p1 - p0, p2 - p0);
+    const float area = 0.5f * glm::length(cr);
+    const Vec3 n = cr / (2.0f * area);
+    const Vec3 d = p - ref;
+    const float dist2 = glm::dot(d, d);
+    if (!(dist2 > 0.0f)) return ls;
+    const float dist = std::sqrt(dist2);
+    ls.wi = d / dist;
+    const float cosL = -glm::dot(n, ls.wi);
+    const Material& m = materials[triMaterial[t]];
+    if (!(cosL > 0.0f) && !(m.twoSidedEmission && cosL < 0.0f)) return ls;
+    ls.radiance = m.emission;
+    ls.lightPos = p;
+    ls.lightNormal = n;
+    ls.distance = dist;
+    ls.pdf = pmf * dist2 / (std::fabs(cosL) * area);
+    return ls;
+  }
+  const PointLight& pl = pointLights[idx - m_emissiveTris.size()];
+  const Vec3 d = pl.position - ref;
+  const float dist2 = glm::dot(d, d);
+  if (!(dist2 > 0.0f)) return ls;
+  ls.distance = std::sqrt(dist2);
+  ls.wi = d / ls.distance;
+  ls.radiance = pl.intensity / dist2;
+  ls.lightPos = pl.position;
+  ls.pdf = pmf;
+  ls.delta = true;
+  return ls;
+}
+
+float Scene::lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const {
+  if (m_triLightIndex.empty()) return 0.0f;
+  const int32_t li = m_triLightIndex[triangle];
+  if (li < 0) return 0.0f;
+  const Vec3 d = lightPos - ref;
+  const float dist2 = glm::dot(d, d);
+  const float cosL = std::fabs(glm::dot(lightNormal, d)) / std::sqrt(dist2);
+  if (!(cosL > 0.0f)) return 0.0f;
+  return m_lightPmf[static_cast<size_t>(li)] * dist2 / (cosL * triangleArea(triangle));
+}
+
+nlohmann::json Scene::statsJson() const {
+  nlohmann::json j;
+  j["triangles"] = triangles.size();
+  j["vertices"] = positions.size();
+  j["shapes"] = shapes.size();
+  j["materials"] = materials.size();
+  j["emissive_triangles"] = m_emissiveTris.size();
+  j["point_lights"] = pointLights.size();
+  j["bounds_min"] = {m_bounds.lo.x, m_bounds.lo.y, m_bounds.lo.z};
+  j["bounds_max"] = {m_bounds.hi.x, m_bounds.hi.y, m_bounds.hi.z};
+  return j;
+}
+
+}  // namespace voxcone

@@ -1,0 +1,454 @@
+// JSON scene loader. Every key is checked: unknown keys and bad values are SceneErrors that
+// name the JSON path (pbrt-v4's ParameterDictionary::ReportUnused, applied to JSON).
+
+#include "voxcone/core/error.h"
+#include "voxcone/scene/mesh.h"
+#include "voxcone/scene/scene.h"
+
+#include <nlohmann/json.hpp>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace voxcone {
+
+namespace {
+
+using nlohmann::json;
+
+/// A JSON object being read: remembers which keys were used so the rest can be reported.
+class Reader {
+public:
+  Reader(const json& j, std::string path, const std::string& file) : m_j(j), m_path(std::move(path)), m_file(file) {
+    if (!j.is_object()) fail("expected an object");
+  }
+
+  [[noreturn]] void fail(const std::string& what, const std::string& key = "") const {
+    throw SceneError(m_file, key.empty() ? m_path : child(key), what);
+  }
+  std::string child(const std::string& key) const { return m_path.empty() ? key : m_path + "." + key; }
+  bool has(const std::string& key) const { return m_j.contains(key); }
+
+  const json& get(const std::string& key) {
+    if (!m_j.contains(key)) fail("missing required key", key);
+    m_used.insert(key);
+    return m_j.at(key);
+  }
+
+  float number(const std::string& key, float def, float lo = -kInf, float hi = kInf, bool required = false) {
+    if (!has(key)) {
+      if (required) fail("missing required key", key);
+      return def;
+    }
+    const json& v = get(key);
+    if (!v.is_number()) fail("expected a number", key);
+    const double d = v.get<double>();
+    if (!std::isfinite(d) || d < lo || d > hi) {
+      std::ostringstream os;
+      os << "value " << d << " out of range [" << lo << ", " << hi << "]";
+      fail(os.str(), key);
+    }
+    return static_cast<float>(d);
+  }
+
+  int64_t integer(const std::string& key, int64_t def, int64_t lo, int64_t hi) {
+    if (!has(key)) return def;
+    const json& v = get(key);
+    if (!v.is_number_integer() && !v.is_number_unsigned()) fail("expected an integer", key);
+    const int64_t i = v.is_number_unsigned() ? static_cast<int64_t>(v.get<uint64_t>()) : v.get<int64_t>();
+    if (i < lo || i > hi) fail("value " + std::to_string(i) + " out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]", key);
+    return i;
+  }
+
+  bool boolean(const std::string& key, bool def) {
+    if (!has(key)) return def;
+    const json& v = get(key);
+    if (!v.is_boolean()) fail("expected true or false", key);
+    return v.get<bool>();
+  }
+
+  std::string string(const std::string& key, const std::string& def, bool required = false) {
+    if (!has(key)) {
+      if (required) fail("missing required key", key);
+      return def;
+    }
+    const json& v = get(key);
+    if (!v.is_string()) fail("expected a string", key);
+    return v.get<std::string>();
+  }
+
+  Vec3 vec3(const std::string& key, const Vec3& def, bool required = false, float lo = -kInf) {
+    if (!has(key)) {
+      if (required) fail("missing required key", key);
+      return def;
+    }
+    return toVec3(get(key), child(key), lo);
+  }
+
+  /// An RGB value given as [r,g,b] or one number (grey).
+  Vec3 rgb(const std::string& key, const Vec3& def, float lo = 0.0f) {
+    if (!has(key)) return def;
+    const json& v = get(key);
+    if (v.is_number()) {
+      const float f = number(key, 0.0f, lo);
+      return Vec3(f);
+    }
+    return toVec3(v, child(key), lo);
+  }
+
+  Vec3 toVec3(const json& v, const std::string& path, float lo = -kInf) const {
+    if (!v.is_array() || v.size() != 3) throw SceneError(m_file, path, "expected an array of 3 numbers");
+    Vec3 r;
+    for (int i = 0; i < 3; ++i) {
+      if (!v[i].is_number()) throw SceneError(m_file, path, "expected an array of 3 numbers");
+      const double d = v[i].get<double>();
+      if (!std::isfinite(d)) throw SceneError(m_file, path, "not a finite number");
+      if (d < lo) throw SceneError(m_file, path, "component " + std::to_string(d) + " below " + std::to_string(lo));
+      r[i] = static_cast<float>(d);
+    }
+    return r;
+  }
+
+  /// Report keys that were never read.
+  void finish() const {
+    for (auto it = m_j.begin(); it != m_j.end(); ++it)
+      if (!m_used.count(it.key())) fail("unknown key", it.key());
+  }
+
+  const std::string& path() const { return m_path; }
+
+private:
+  const json& m_j;
+  std::string m_path;
+  const std::string& m_file;
+  std::set<std::string> m_used;
+};
+
+Material parseMaterial(Reader& r, const std::string& name) {
+  Material m;
+  m.name = name;
+  const std::string type = r.string("type", "", true);
+  if (type == "lambertian" || type == "diffuse") {
+    m.type = MaterialType::Lambertian;
+    m.albedo = r.rgb("albedo", Vec3(0.5f));
+  } else if (type == "oren_nayar") {
+    m.type = MaterialType::OrenNayar;
+    m.albedo = r.rgb("albedo", Vec3(0.5f));
+    m.sigmaRad = glm::radians(r.number("sigma_deg", 20.0f, 0.0f, 90.0f));
+  } else if (type == "mirror") {
+    m.type = MaterialType::Mirror;
+    m.specular = r.rgb("specular", Vec3(1.0f));
+  } else if (type == "dielectric" || type == "rough_dielectric") {
+    m.type = type == "dielectric" ? MaterialType::Dielectric : MaterialType::RoughDielectric;
+    m.ior = r.number("ior", 1.5f, 1.0001f, 10.0f);
+    m.specular = r.rgb("specular", Vec3(1.0f));
+  } else if (type == "conductor" || type == "rough_conductor") {
+    m.type = type == "conductor" ? MaterialType::Conductor : MaterialType::RoughConductor;
+    m.eta = r.vec3("eta", Vec3(0.2f), false, 0.0f);
+    m.k = r.vec3("k", Vec3(3.0f), false, 0.0f);
+    m.specular = r.rgb("specular", Vec3(1.0f));
+  } else {
+    r.fail("unknown material type '" + type +
+               "' (lambertian, oren_nayar, mirror, dielectric, rough_dielectric, conductor, rough_conductor)",
+           "type");
+  }
+  if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric) {
+    m.roughness = r.number("roughness", 0.1f, 1e-4f, 1.0f);
+    const std::string dist = r.string("distribution", "ggx");
+    if (dist == "ggx")
+      m.distribution = MicrofacetDistribution::GGX;
+    else if (dist == "beckmann")
+      m.distribution = MicrofacetDistribution::Beckmann;
+    else
+      r.fail("unknown distribution '" + dist + "' (ggx, beckmann)", "distribution");
+  }
+  m.emission = r.rgb("emission", Vec3(0.0f));
+  m.twoSidedEmission = r.boolean("two_sided_emission", false);
+  r.finish();
+  return m;
+}
+
+/// Affine transform: scale, then rotation about an axis, then translation.
+glm::mat4 parseTransform(Reader& r) {
+  glm::mat4 m(1.0f);
+  Vec3 scale(1.0f);
+  if (r.has("scale")) {
+    const json& s = r.get("scale");
+    if (s.is_number()) {
+      scale = Vec3(r.number("scale", 1.0f));
+    } else {
+      scale = r.toVec3(s, r.child("scale"));
+    }
+    if (scale.x == 0.0f || scale.y == 0.0f || scale.z == 0.0f) r.fail("scale must not be zero", "scale");
+  }
+  const Vec3 translate = r.vec3("translate", Vec3(0.0f));
+  const Vec3 axis = r.vec3("rotate_axis", Vec3(0.0f, 1.0f, 0.0f));
+  const float angle = r.number("rotate_deg", 0.0f, -360.0f, 360.0f);
+  r.finish();
+  if (glm::length(axis) == 0.0f) r.fail("rotation axis must not be zero", "rotate_axis");
+  m = glm::translate(m, translate);
+  m = glm::rotate(m, glm::radians(angle), glm::normalize(axis));
+  m = glm::scale(m, scale);
+  return m;
+}
+
+/// A geodesic sphere: icosahedron subdivided `level` times, projected to the sphere.
+void makeSphere(const Vec3& center, float radius, int level, bool inward, std::vector<Vec3>& pos, std::vector<UVec3>& tris) {
+  const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
+  std::vector<Vec3> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<UVec3> f = {{0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                          {11, 10, 2}, {10, 7, 6}, {7, 1, 8}, {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8},
+                          {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
+  for (Vec3& p : v) p = glm::normalize(p);
+  for (int l = 0; l < level; ++l) {
+    std::vector<UVec3> nf;
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
+    auto midpoint = [&](uint32_t a, uint32_t b) {
+      const auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back(glm::normalize(v[a] + v[b]));
+      const uint32_t idx = static_cast<uint32_t>(v.size() - 1);
+      mid.emplace(key, idx);
+      return idx;
+    };
+    for (const UVec3& tri : f) {
+      const uint32_t a = midpoint(tri.x, tri.y), b = midpoint(tri.y, tri.z), c = midpoint(tri.z, tri.x);
+      nf.push_back({tri.x, a, c});
+      nf.push_back({tri.y, b, a});
+      nf.push_back({tri.z, c, b});
+      nf.push_back({a, b, c});
+    }
+    f.swap(nf);
+  }
+  const uint32_t base = static_cast<uint32_t>(pos.size());
+  for (const Vec3& p : v) pos.push_back(center + radius * p);
+  for (UVec3 tri : f) {
+    if (inward) std::swap(tri.y, tri.z);
+    tris.push_back(tri + UVec3(base));
+  }
+}
+
+class SceneBuilder {
+public:
+  SceneBuilder(const std::string& file, const std::string& baseDir) : m_file(file), m_baseDir(baseDir) {
+    m_scene.sourcePath = file;
+  }
+
+  Scene build(const json& root) {
+    Reader r(root, "", m_file);
+    if (r.has("camera")) parseCamera(Reader(r.get("camera"), "camera", m_file));
+    else r.fail("missing required key", "camera");
+    if (r.has("render")) parseRender(Reader(r.get("render"), "render", m_file));
+    parseMaterials(r.get("materials"));
+    const json& shapes = r.get("shapes");
+    if (!shapes.is_array()) r.fail("expected an array", "shapes");
+    for (size_t i = 0; i < shapes.size(); ++i) parseShape(shapes[i], "shapes[" + std::to_string(i) + "]");
+    if (r.has("lights")) {
+      const json& lights = r.get("lights");
+      if (!lights.is_array()) r.fail("expected an array", "lights");
+      for (size_t i = 0; i < lights.size(); ++i) parseLight(lights[i], "lights[" + std::to_string(i) + "]");
+    }
+    r.finish();
+    if (m_scene.triangles.empty()) throw SceneError(m_file, "shapes", "the scene has no triangles");
+    m_scene.finalize();
+    if (!m_scene.hasLights()) throw SceneError(m_file, "", "the scene has no light (no emissive surface, no point light)");
+    return std::move(m_scene);
+  }
+
+private:
+  void parseCamera(Reader r) {
+    const Vec3 pos = r.vec3("position", Vec3(0.0f), true);
+    const Vec3 target = r.vec3("target", Vec3(0.0f), true);
+    const Vec3 up = r.vec3("up", Vec3(0.0f, 1.0f, 0.0f));
+    const float fov = r.number("fov_y_deg", 40.0f, 0.01f, 179.0f);
+    r.finish();
+    if (glm::length(target - pos) == 0.0f) r.fail("target equals position", "target");
+    if (glm::length(glm::cross(target - pos, up)) <= 1e-6f * glm::length(target - pos) * glm::length(up))
+      r.fail("up is parallel to the view direction", "up");
+    m_scene.camera = Camera(pos, target, up, fov);
+  }
+
+  void parseRender(Reader r) {
+    RenderSettings& s = m_scene.render;
+    s.width = static_cast<int>(r.integer("width", s.width, 1, 32768));
+    s.height = static_cast<int>(r.integer("height", s.height, 1, 32768));
+    s.spp = static_cast<int>(r.integer("spp", s.spp, 1, 1 << 24));
+    s.maxDepth = static_cast<int>(r.integer("max_depth", s.maxDepth, 1, 1024));
+    s.seed = static_cast<uint64_t>(r.integer("seed", 0, 0, INT64_MAX));
+    s.method = r.string("method", s.method);
+    r.finish();
+  }
+
+  void parseMaterials(const json& mats) {
+    if (!mats.is_object()) throw SceneError(m_file, "materials", "expected an object of named materials");
+    for (auto it = mats.begin(); it != mats.end(); ++it) {
+      Reader r(it.value(), "materials." + it.key(), m_file);
+      m_materialIndex[it.key()] = static_cast<uint32_t>(m_scene.materials.size());
+      m_scene.materials.push_back(parseMaterial(r, it.key()));
+    }
+  }
+
+  uint32_t materialRef(Reader& r, const std::string& key) {
+    const std::string name = r.string(key, "", true);
+    auto it = m_materialIndex.find(name);
+    if (it == m_materialIndex.end()) r.fail("unknown material '" + name + "'", key);
+    return it->second;
+  }
+
+  void addShape(const std::string& name, const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
+                const std::vector<UVec3>& tris, const std::vector<uint32_t>& triMat, bool smooth) {
+    ShapeInfo info;
+    info.name = name;
+    info.firstTriangle = static_cast<uint32_t>(m_scene.triangles.size());
+    info.triangleCount = static_cast<uint32_t>(tris.size());
+    info.smoothNormals = smooth && !nrm.empty();
+    const uint32_t shapeIdx = static_cast<uint32_t>(m_scene.shapes.size());
+    const uint32_t base = static_cast<uint32_t>(m_scene.positions.size());
+    if (info.smoothNormals && m_scene.normals.size() < m_scene.positions.size())
+      m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
+    m_scene.positions.insert(m_scene.positions.end(), pos.begin(), pos.end());
+    if (info.smoothNormals)
+      m_scene.normals.insert(m_scene.normals.end(), nrm.begin(), nrm.end());
+    else if (!m_scene.normals.empty())
+      m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
+    m_scene.triangles.reserve(m_scene.triangles.size() + tris.size());
+    for (size_t i = 0; i < tris.size(); ++i) {
+      m_scene.triangles.push_back(tris[i] + UVec3(base));
+      m_scene.triMaterial.push_back(triMat.size() == 1 ? triMat[0] : triMat[i]);
+      m_scene.triShape.push_back(shapeIdx);
+    }
+    m_scene.shapes.push_back(info);
+  }
+
+  void parseShape(const json& j, const std::string& path) {
+    Reader r(j, path, m_file);
+    const std::string type = r.string("type", "", true);
+    const std::string name = r.string("name", type + std::to_string(m_scene.shapes.size()));
+    std::vector<Vec3> pos, nrm;
+    std::vector<UVec3> tris;
+    std::vector<uint32_t> triMat;
+    bool smooth = false;
+    if (type == "quad" || type == "triangle") {
+      const size_t n = type == "quad" ? 4 : 3;
+      const json& verts = r.get("vertices");
+      if (!verts.is_array() || verts.size() != n)
+        r.fail("expected " + std::to_string(n) + " vertices", "vertices");
+      for (size_t i = 0; i < n; ++i) pos.push_back(r.toVec3(verts[i], r.child("vertices") + "[" + std::to_string(i) + "]"));
+      // A quad is the triangles (v0,v1,v2) and (v0,v2,v3) (SPEC.md: the split is geometry).
+      tris.push_back({0, 1, 2});
+      if (n == 4) tris.push_back({0, 2, 3});
+      triMat.push_back(materialRef(r, "material"));
+    } else if (type == "sphere") {
+      const Vec3 c = r.vec3("center", Vec3(0.0f), true);
+      const float radius = r.number("radius", 1.0f, 1e-6f, kInf, true);
+      const int level = static_cast<int>(r.integer("subdivisions", 3, 0, 8));
+      const bool inward = r.boolean("inward", false);
+      makeSphere(c, radius, level, inward, pos, tris);
+      triMat.push_back(materialRef(r, "material"));
+    } else if (type == "mesh") {
+      const std::string file = r.string("file", "", true);
+      std::filesystem::path p(file);
+      if (p.is_relative()) p = std::filesystem::path(m_baseDir) / p;
+      TriangleMesh mesh;
+      try {
+        mesh = loadMesh(p.string());
+      } catch (const Error& e) {
+        r.fail(e.what(), "file");
+      }
+      if (mesh.triangles.empty()) r.fail("mesh '" + p.string() + "' has no triangles", "file");
+      glm::mat4 xf(1.0f);
+      if (r.has("transform")) {
+        Reader tr(r.get("transform"), r.child("transform"), m_file);
+        xf = parseTransform(tr);
+      }
+      smooth = r.boolean("smooth_normals", false);
+      if (smooth && mesh.normals.empty()) r.fail("smooth_normals asks for vertex normals but the mesh has none", "smooth_normals");
+      const glm::mat3 nxf = glm::transpose(glm::inverse(glm::mat3(xf)));
+      pos.reserve(mesh.positions.size());
+      for (const Vec3& v : mesh.positions) pos.push_back(Vec3(xf * Vec4(v, 1.0f)));
+      if (smooth)
+        for (const Vec3& n : mesh.normals) nrm.push_back(glm::normalize(nxf * n));
+      tris = std::move(mesh.triangles);
+      // Winding flips under a mirroring transform; keep the front side where the file had it.
+      if (glm::determinant(glm::mat3(xf)) < 0.0f)
+        for (UVec3& t : tris) std::swap(t.y, t.z);
+      if (r.has("material")) {
+        triMat.push_back(materialRef(r, "material"));
+      } else {
+        if (mesh.materials.empty()) r.fail("the mesh defines no materials: give 'material'", "material");
+        std::vector<uint32_t> fileMats;
+        for (const MeshMaterial& mm : mesh.materials) fileMats.push_back(addMeshMaterial(mm, file));
+        triMat.resize(tris.size());
+        for (size_t i = 0; i < tris.size(); ++i) {
+          const int32_t fm = i < mesh.faceMaterial.size() ? mesh.faceMaterial[i] : -1;
+          if (fm < 0 || static_cast<size_t>(fm) >= fileMats.size())
+            r.fail("face " + std::to_string(i) + " has no material: give 'material'", "material");
+          triMat[i] = fileMats[static_cast<size_t>(fm)];
+        }
+      }
+    } else {
+      r.fail("unknown shape type '" + type + "' (quad, triangle, sphere, mesh)", "type");
+    }
+    r.finish();
+    addShape(name, pos, nrm, tris, triMat, smooth);
+  }
+
+  /// An MTL material becomes a Lambertian with Kd (and Ke as emission).
+  uint32_t addMeshMaterial(const MeshMaterial& mm, const std::string& file) {
+    Material m;
+    m.name = file + ":" + mm.name;
+    m.type = MaterialType::Lambertian;
+    m.albedo = glm::clamp(mm.kd, Vec3(0.0f), Vec3(1.0f));
+    m.emission = glm::max(mm.ke, Vec3(0.0f));
+    m_scene.materials.push_back(m);
+    return static_cast<uint32_t>(m_scene.materials.size() - 1);
+  }
+
+  void parseLight(const json& j, const std::string& path) {
+    Reader r(j, path, m_file);
+    const std::string type = r.string("type", "", true);
+    if (type != "point") r.fail("unknown light type '" + type + "' (point; area lights are emissive shapes)", "type");
+    PointLight pl;
+    pl.position = r.vec3("position", Vec3(0.0f), true);
+    pl.intensity = r.rgb("intensity", Vec3(0.0f));
+    r.finish();
+    m_scene.pointLights.push_back(pl);
+  }
+
+  std::string m_file, m_baseDir;
+  Scene m_scene;
+  std::map<std::string, uint32_t> m_materialIndex;
+};
+
+}  // namespace
+
+Scene parseScene(const std::string& jsonText, const std::string& origin, const std::string& baseDir) {
+  json root;
+  try {
+    root = json::parse(jsonText);
+  } catch (const json::parse_error& e) {
+    std::string msg = e.what();
+    // nlohmann's message: "[json.exception.parse_error.101] parse error at line 3, column 5: ..."
+    const auto pos = msg.find("parse error");
+    throw SceneError(origin, "", "invalid JSON: " + (pos == std::string::npos ? msg : msg.substr(pos)));
+  }
+  return SceneBuilder(origin, baseDir).build(root);
+}
+
+Scene loadScene(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path, "", "cannot open scene file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  const std::string dir = std::filesystem::path(path).parent_path().string();
+  return parseScene(ss.str(), path, dir.empty() ? "." : dir);
+}
+
+}  // namespace voxcone
