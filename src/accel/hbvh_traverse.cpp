@@ -45,7 +45,10 @@ inline float enterNode(const Hbvh::Node& n, const Vec4* spheres, uint32_t idx, c
   const Vec3 f = rb.org - Vec3(s);
   const float b = -glm::dot(f, rb.dirUnit);
   const Vec3 l = f + b * rb.dirUnit;
-  const float disc = s.w * s.w - glm::dot(l, l);
+  // Rounding in l grows with the distance |f| to the centre, not with the radius: widen the
+  // radius by 1e-6 |f| (several ulps of |f|) so a ray grazing a vertex on the sphere is kept.
+  const float rEff = s.w + 1e-6f * std::sqrt(glm::dot(f, f));
+  const float disc = rEff * rEff - glm::dot(l, l);
   if (disc < 0.0f) return kInf;
   const float h = std::sqrt(disc);
   const float sNear = (b - h) * rb.invLen, sFar = (b + h) * rb.invLen;

@@ -1,6 +1,7 @@
 // `voxcone render SCENE`: load, build the HBVH, render, write EXR + PNG + JSON sidecar.
 
 #include "commands.h"
+#include "default_scene.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/parallel.h"
@@ -44,7 +45,10 @@ void runRender(const RenderOptions& o) {
   ConsoleProgress progress(o.quiet);
 
   Timer t;
-  const Scene scene = loadScene(o.scenePath);
+  const std::string sceneName =
+      o.scenePath.empty() ? std::string(kDefaultSceneName) : std::filesystem::path(o.scenePath).stem().string();
+  const Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
+                                          : loadScene(o.scenePath);
   const double loadSec = t.seconds();
 
   RenderSettings settings = scene.render;
@@ -64,13 +68,21 @@ void runRender(const RenderOptions& o) {
 
   // Output paths: <stem>.exr, <stem>.png, <stem>.json next to each other.
   std::filesystem::path out = o.output.empty()
-                                  ? std::filesystem::path("out") / std::filesystem::path(o.scenePath).stem()
+                                  ? std::filesystem::path("out") / sceneName
                                   : std::filesystem::path(o.output);
   const std::string ext = out.extension().string();
   if (ext == ".exr" || ext == ".png" || ext == ".json") out.replace_extension();
   if (o.output.empty()) std::filesystem::create_directories(out.parent_path());
   else if (!out.parent_path().empty() && !std::filesystem::is_directory(out.parent_path()))
     throw SettingsError("output folder does not exist: " + out.parent_path().string());
+
+  // Never let an output replace the scene file (e.g. -o scene writes scene.json).
+  if (!o.scenePath.empty())
+    for (const char* e : {".exr", ".png", ".json"}) {
+      std::error_code ec;
+      if (std::filesystem::equivalent(out.string() + e, o.scenePath, ec))
+        throw SettingsError("output " + out.string() + e + " would overwrite the scene file");
+    }
 
   t.reset();
   const Hbvh accel(scene, HbvhBuildSettings{}, &progress);
@@ -86,7 +98,7 @@ void runRender(const RenderOptions& o) {
 
   nlohmann::json meta;
   meta["voxcone_version"] = "0.1.0";
-  meta["scene"] = o.scenePath;
+  meta["scene"] = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName : o.scenePath;
   meta["method"] = settings.method;
   meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
                       {"max_depth", settings.maxDepth}, {"seed", settings.seed}, {"threads", threads.threads()},
@@ -107,7 +119,7 @@ void runRender(const RenderOptions& o) {
   writeJsonAtomic(jsonPath, meta);
   std::printf("wrote %s (%s, %s)\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str());
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
-              settings.height, settings.spp, o.scenePath.c_str(), result.seconds, total.seconds());
+              settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());
 }
 
 }  // namespace
@@ -115,7 +127,7 @@ void runRender(const RenderOptions& o) {
 void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON)")->required();
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON); default: the built-in cornell-box");
   cmd->add_option("-o,--output", o->output, "Output path; .exr/.png/.json are written beside it (default out/<scene>)");
   cmd->add_option("--method", o->method, "Integrator: " + [] {
     std::string s;

@@ -37,9 +37,9 @@ Vec3 estimateDirectLight(const Scene& scene, const Hbvh& accel, const SurfaceHit
   return sum / static_cast<float>(samples);
 }
 
-Vec3 WhittedIntegrator::li(const Ray& ray, Rng& rng) const { return trace(ray, rng, 0); }
+Vec3 WhittedIntegrator::li(const Ray& ray, Rng& rng) const { return trace(ray, rng, 0, 1.0f); }
 
-Vec3 WhittedIntegrator::trace(const Ray& ray, Rng& rng, int depth) const {
+Vec3 WhittedIntegrator::trace(const Ray& ray, Rng& rng, int depth, float throughput) const {
   const std::optional<Hit> hit = m_accel.intersect(ray);
   if (!hit) return Vec3(0.0f);
   const Vec3 pos = ray.at(hit->t);
@@ -54,9 +54,12 @@ Vec3 WhittedIntegrator::trace(const Ray& ray, Rng& rng, int depth) const {
   DeltaLobe lobes[2];
   const int n = bsdfDeltaLobes(mat, frame.toLocal(woWorld), lobes);
   for (int i = 0; i < n; ++i) {
-    if (isBlack(lobes[i].weight)) continue;
+    // Splitting at every dielectric doubles the rays per level; drop branches whose
+    // accumulated weight is below 1/1000 (they cannot change the pixel visibly).
+    const float branch = throughput * maxComponent(lobes[i].weight);
+    if (branch < 1e-3f) continue;
     const Ray next = spawnRay(pos, sh.geomNormal, frame.toWorld(lobes[i].wi));
-    L += lobes[i].weight * trace(next, rng, depth + 1);
+    L += lobes[i].weight * trace(next, rng, depth + 1, branch);
   }
   return L;
 }

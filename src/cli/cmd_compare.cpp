@@ -1,0 +1,118 @@
+/// \file cmd_compare.cpp
+/// `voxcone compare TEST REF`: image metrics of a test image against a reference, with optional
+/// pass/fail thresholds (exit code 1) for regression scripts.
+
+#include "commands.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/image/image_io.h"
+#include "voxcone/image/metrics.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <string>
+
+namespace voxcone {
+namespace {
+
+/// Values of the compare subcommand's arguments (owned by the callback).
+struct CompareArgs {
+  std::string testPath;
+  std::string refPath;
+  double thresholdRelMse = 0.0;
+  double thresholdPsnrDb = 0.0;
+  std::string errorImagePath;
+  bool json = false;
+  CLI::Option* thresholdRelMseOpt = nullptr;
+  CLI::Option* thresholdPsnrOpt = nullptr;
+};
+
+/// printf-style formatting of one number.
+std::string format(const char* fmt, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), fmt, v);
+  return buf;
+}
+
+/// Lower-case extension of `path`, dot included.
+std::string lowerExtension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+void runCompare(const CompareArgs& args) {
+  // Reject an unwritable error-image format before reading (possibly large) images.
+  if (!args.errorImagePath.empty()) {
+    const std::string ext = lowerExtension(args.errorImagePath);
+    if (ext != ".png" && ext != ".exr")
+      throw ImageError(args.errorImagePath + ": unsupported error-image extension '" + ext + "' (use .png or .exr)");
+  }
+  const Image test = readImage(args.testPath);
+  const Image ref = readImage(args.refPath);
+  const ImageMetrics m = compareImages(test, ref);
+
+  if (!args.errorImagePath.empty()) {
+    const nlohmann::json meta = {{"error_map", "per-pixel relative squared error, inferno ramp, 99th percentile scale"},
+                                 {"test", args.testPath},
+                                 {"reference", args.refPath}};
+    writeImage(args.errorImagePath, falseColorError(test, ref), meta);
+  }
+
+  if (args.json) {
+    std::cout << m.toJson().dump() << std::endl;
+  } else {
+    std::cout << "relMSE        " << format("%.6g", m.relMse) << "\n"
+              << "MSE           " << format("%.6g", m.mse) << "\n"
+              << "PSNR (sRGB8)  " << (std::isinf(m.psnrSrgb8) ? std::string("inf") : format("%.4f", m.psnrSrgb8))
+              << " dB\n"
+              << "SSIM          " << format("%.6f", m.ssim) << std::endl;
+  }
+
+  // Thresholds: written as !(value within bound) so that a NaN metric fails.
+  std::string failures;
+  if (args.thresholdRelMseOpt->count() > 0 && !(m.relMse <= args.thresholdRelMse))
+    failures += "relMSE " + format("%.6g", m.relMse) + " exceeds --threshold-relmse " +
+                format("%.6g", args.thresholdRelMse);
+  if (args.thresholdPsnrOpt->count() > 0 && !(m.psnrSrgb8 >= args.thresholdPsnrDb)) {
+    if (!failures.empty()) failures += "; ";
+    failures += "PSNR " + format("%.4f", m.psnrSrgb8) + " dB is below --threshold-psnr " +
+                format("%.4f", args.thresholdPsnrDb) + " dB";
+  }
+  if (!failures.empty()) {
+    std::cerr << "voxcone compare: FAIL: " << failures << std::endl;
+    throw CLI::RuntimeError(1);
+  }
+}
+
+}  // namespace
+
+void addCompareCommand(CLI::App& app) {
+  auto args = std::make_shared<CompareArgs>();
+  CLI::App* sub = app.add_subcommand(
+      "compare", "Compare a test image with a reference: relMSE, MSE, PSNR (8-bit sRGB), SSIM");
+  sub->add_option("TEST", args->testPath, "Test image (EXR, PNG, any format OpenImageIO reads)")
+      ->required()
+      ->type_name("");
+  sub->add_option("REF", args->refPath, "Reference image of the same size")->required()->type_name("");
+  args->thresholdRelMseOpt =
+      sub->add_option("--threshold-relmse", args->thresholdRelMse, "Fail (exit 1) when relMSE is above X")
+          ->type_name("X");
+  args->thresholdPsnrOpt =
+      sub->add_option("--threshold-psnr", args->thresholdPsnrDb, "Fail (exit 1) when PSNR (8-bit sRGB) is below DB")
+          ->type_name("DB");
+  sub->add_option("--error-image", args->errorImagePath,
+                  "Write a false-colour map of the relative squared error (.png or .exr)")
+      ->type_name("PATH");
+  sub->add_flag("--json", args->json, "Print the metrics as one JSON object instead of the table");
+  sub->callback([args]() { runCompare(*args); });
+}
+
+}  // namespace voxcone

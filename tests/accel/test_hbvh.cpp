@@ -1,0 +1,245 @@
+// The HBVH against brute force: closest hits and occlusion on over a million random rays over
+// several meshes, including rays aimed exactly at vertices and edges.
+
+#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/triangle.h"
+#include "voxcone/core/parallel.h"
+#include "voxcone/core/rng.h"
+#include "voxcone/core/sampling.h"
+#include "voxcone/scene/scene.h"
+
+#include "../support/test_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+
+namespace voxcone {
+namespace {
+
+struct Soup {
+  std::string name;
+  std::vector<Vec3> pos;
+  std::vector<UVec3> tris;
+};
+
+std::optional<Hit> bruteIntersect(const Soup& s, const Ray& ray) {
+  const WatertightRay wr(ray.dir);
+  Hit best;
+  bool found = false;
+  float tMax = ray.tMax;
+  for (uint32_t i = 0; i < s.tris.size(); ++i) {
+    float t, b1, b2;
+    if (intersectTriangleWatertight(ray.origin, wr, s.pos[s.tris[i].x], s.pos[s.tris[i].y], s.pos[s.tris[i].z],
+                                    ray.tMin, tMax, t, b1, b2)) {
+      tMax = t;
+      best = {t, i, b1, b2};
+      found = true;
+    }
+  }
+  return found ? std::optional<Hit>(best) : std::nullopt;
+}
+
+Soup sphereSoup(int subdiv) {
+  const Scene sc = test::furnaceScene(0.5f, 1.0f, 0.0f, subdiv);
+  return {"sphere", sc.positions, sc.triangles};
+}
+
+Soup randomSoup(int n, uint64_t seed) {
+  Soup s{"random", {}, {}};
+  Rng rng(seed, 0);
+  for (int i = 0; i < n; ++i) {
+    const Vec3 c(rng.uniform() * 10 - 5, rng.uniform() * 10 - 5, rng.uniform() * 10 - 5);
+    const float size = 0.05f + 1.5f * rng.uniform() * rng.uniform();
+    for (int k = 0; k < 3; ++k) s.pos.push_back(c + size * (Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5f));
+    s.tris.push_back(UVec3(3 * i, 3 * i + 1, 3 * i + 2));
+  }
+  return s;
+}
+
+/// A wavy grid of quads (shared edges and vertices everywhere).
+Soup gridSoup(int n) {
+  Soup s{"grid", {}, {}};
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i)
+      s.pos.emplace_back(float(i), 0.3f * std::sin(0.7f * i) * std::cos(0.5f * j), float(j));
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const uint32_t a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      s.tris.push_back({a, b, d});
+      s.tris.push_back({a, d, c});
+    }
+  return s;
+}
+
+Soup cornellSoup() {
+  const Scene sc = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
+  return {"cornell", sc.positions, sc.triangles};
+}
+
+/// Random rays: from points in an enlarged bounding box towards random points, vertices and
+/// edge points of the mesh.
+Ray makeRay(const Soup& s, const Bounds3& b, Rng& rng) {
+  const Vec3 ext = b.diagonal() * 1.5f + Vec3(1e-3f);
+  const Vec3 o = b.center() + (Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5f) * ext;
+  Vec3 target;
+  const float kind = rng.uniform();
+  const UVec3& t = s.tris[std::min<size_t>(size_t(rng.uniform() * s.tris.size()), s.tris.size() - 1)];
+  if (kind < 0.25f) {
+    target = s.pos[t[std::min(2, int(rng.uniform() * 3))]];  // exactly a vertex
+  } else if (kind < 0.5f) {
+    const float u = rng.uniform();
+    target = (1 - u) * s.pos[t.x] + u * s.pos[t.y];  // on an edge
+  } else if (kind < 0.75f) {
+    target = b.center() + (Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5f) * ext;
+  } else {
+    const Vec2 bc = sampleUniformTriangle(rng.uniform2());
+    target = (1 - bc.x - bc.y) * s.pos[t.x] + bc.x * s.pos[t.y] + bc.y * s.pos[t.z];
+  }
+  Ray r;
+  r.origin = o;
+  r.dir = target - o;
+  if (glm::length(r.dir) == 0.0f) r.dir = Vec3(0, 0, 1);
+  if (rng.uniform() < 0.5f) r.dir = glm::normalize(r.dir);
+  r.tMax = rng.uniform() < 0.2f ? 0.5f * kInf : kInf;
+  return r;
+}
+
+/// True when two hit distances are the same surface point: rays through a shared vertex or edge
+/// hit several triangles whose distances differ by float rounding of their own vertices, and
+/// brute force and the HBVH may keep different ones.
+bool sameHitDistance(float a, float b) { return std::fabs(a - b) <= 1e-5f * std::max(1.0f, std::fabs(a)); }
+
+TEST(Hbvh, MatchesBruteForceOnOverAMillionRays) {
+  const std::vector<Soup> soups = {sphereSoup(3), randomSoup(400, 7), gridSoup(14), cornellSoup()};
+  constexpr int kRaysPerMesh = 1 << 18;
+  uint64_t total = 0, hits = 0;
+  for (const Soup& s : soups) {
+    Bounds3 b;
+    for (const Vec3& p : s.pos) b.extend(p);
+    // Rays and their brute-force closest hits, computed once per mesh.
+    std::vector<Ray> rays(kRaysPerMesh);
+    std::vector<std::optional<Hit>> ref(kRaysPerMesh);
+    tbb::parallel_for(0, kRaysPerMesh / 1024, [&](int block) {
+      Rng rng(42, uint64_t(block));
+      for (int i = block * 1024; i < (block + 1) * 1024; ++i) {
+        rays[i] = makeRay(s, b, rng);
+        ref[i] = bruteIntersect(s, rays[i]);
+      }
+    });
+    for (const auto& h : ref) hits += h.has_value();
+    total += kRaysPerMesh;
+    // A plain AABB BVH, the hybrid, and spheres on every node with small leaves.
+    for (float ratio : {0.0f, 1.0f, 100.0f}) {
+      HbvhBuildSettings settings;
+      settings.sphereAreaRatio = ratio;
+      settings.maxLeafSize = ratio == 100.0f ? 2 : 8;
+      const Hbvh bvh(s.pos, s.tris, settings);
+      std::atomic<uint64_t> closest{0}, occlusion{0};
+      tbb::parallel_for(0, kRaysPerMesh / 1024, [&](int block) {
+        Rng rng(43, uint64_t(block));
+        for (int i = block * 1024; i < (block + 1) * 1024; ++i) {
+          const Ray& r = rays[i];
+          const auto got = bvh.intersect(r);
+          if (ref[i].has_value() != got.has_value() || (got && !sameHitDistance(ref[i]->t, got->t))) {
+            ++closest;
+          }
+          // Occlusion up to tOcc: something lies in (tMin, tOcc) exactly when the closest hit does.
+          const float tOcc = ref[i] ? ref[i]->t * (0.5f + rng.uniform()) : r.tMax;
+          if (ref[i] && sameHitDistance(ref[i]->t, tOcc)) continue;
+          if (bvh.occluded(r, tOcc) != (ref[i] && ref[i]->t < tOcc)) ++occlusion;
+        }
+      });
+      EXPECT_EQ(closest.load(), 0u) << s.name << " sphereAreaRatio " << ratio;
+      EXPECT_EQ(occlusion.load(), 0u) << s.name << " sphereAreaRatio " << ratio;
+    }
+  }
+  EXPECT_GE(total, 1000000u);
+  EXPECT_GT(hits, total / 4);  // the ray sets really hit the meshes
+}
+
+TEST(Hbvh, ClosedMeshIsWatertightThroughVerticesAndEdges) {
+  // Every ray from the centre of a closed sphere must hit it, also when aimed exactly at a
+  // vertex or an edge point (no crack between triangles).
+  const Soup s = sphereSoup(4);
+  const Hbvh bvh(s.pos, s.tris);
+  Rng rng(3, 0);
+  int misses = 0, rays = 0;
+  for (size_t t = 0; t < s.tris.size(); ++t) {
+    const UVec3& tri = s.tris[t];
+    const Vec3 targets[4] = {s.pos[tri.x], 0.5f * (s.pos[tri.x] + s.pos[tri.y]),
+                             s.pos[tri.y] + rng.uniform() * (s.pos[tri.z] - s.pos[tri.y]), s.pos[tri.z]};
+    for (const Vec3& target : targets) {
+      Ray r;
+      r.origin = Vec3(0.01f, -0.02f, 0.015f);
+      r.dir = target - r.origin;
+      ++rays;
+      if (!bvh.intersect(r)) ++misses;
+      if (!bvh.occluded(r)) ++misses;
+    }
+  }
+  EXPECT_EQ(misses, 0) << "of " << rays << " rays";
+}
+
+TEST(Hbvh, StatsAreConsistent) {
+  const Soup s = randomSoup(5000, 11);
+  const Hbvh bvh(s.pos, s.tris);
+  const HbvhStats& st = bvh.stats();
+  EXPECT_EQ(st.triangles, 5000u);
+  EXPECT_EQ(st.nodes, 2 * st.leaves - 1);  // a full binary tree
+  EXPECT_GT(st.maxDepth, 5);
+  EXPECT_LE(st.maxDepth, 61);
+  EXPECT_GT(st.sahCost, 1.0);
+  EXPECT_GT(st.bytes, 5000u * 40u);
+  EXPECT_LE(st.avgLeafSize, 8.0);
+}
+
+TEST(Hbvh, BuildIsIdenticalAtAnyThreadCount) {
+  const Soup s = randomSoup(20000, 5);
+  HbvhBuildSettings settings;
+  settings.parallelThreshold = 256;
+  HbvhStats a, b;
+  std::vector<std::optional<Hit>> ha, hb;
+  Bounds3 bounds;
+  for (const Vec3& p : s.pos) bounds.extend(p);
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    const Hbvh bvh(s.pos, s.tris, settings);
+    (threads == 1 ? a : b) = bvh.stats();
+    Rng rng(9, 0);
+    auto& hits = threads == 1 ? ha : hb;
+    for (int i = 0; i < 2000; ++i) hits.push_back(bvh.intersect(makeRay(s, bounds, rng)));
+  }
+  EXPECT_EQ(a.nodes, b.nodes);
+  EXPECT_EQ(a.maxDepth, b.maxDepth);
+  EXPECT_DOUBLE_EQ(a.sahCost, b.sahCost);
+  ASSERT_EQ(ha.size(), hb.size());
+  for (size_t i = 0; i < ha.size(); ++i) {
+    ASSERT_EQ(ha[i].has_value(), hb[i].has_value());
+    if (ha[i]) {
+      EXPECT_EQ(ha[i]->t, hb[i]->t);
+      EXPECT_EQ(ha[i]->triangle, hb[i]->triangle);
+    }
+  }
+}
+
+TEST(Hbvh, EmptyAndDegenerateInput) {
+  const Hbvh empty(std::vector<Vec3>{}, std::vector<UVec3>{});
+  Ray r;
+  EXPECT_FALSE(empty.intersect(r));
+  EXPECT_FALSE(empty.occluded(r));
+  // Degenerate (zero-area) and NaN triangles never hit and never break the build.
+  std::vector<Vec3> pos = {Vec3(0), Vec3(0), Vec3(0), Vec3(NAN), Vec3(1), Vec3(2), Vec3(-1, -1, 2), Vec3(1, -1, 2),
+                           Vec3(0, 1, 2)};
+  std::vector<UVec3> tris = {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}};
+  const Hbvh bvh(pos, tris);
+  const auto h = bvh.intersect(r);
+  ASSERT_TRUE(h);
+  EXPECT_EQ(h->triangle, 2u);
+  EXPECT_FLOAT_EQ(h->t, 2.0f);
+}
+
+}  // namespace
+}  // namespace voxcone

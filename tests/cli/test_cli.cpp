@@ -1,0 +1,107 @@
+// The `voxcone` executable end to end: outputs, sidecar, and one-line errors with a non-zero
+// exit and no output for bad input.
+
+#include "../support/test_scenes.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+namespace voxcone {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int code;
+  std::string err;
+};
+
+RunResult run(const std::string& args) {
+  const std::string errFile = ::testing::TempDir() + "/cli_stderr.txt";
+  const std::string cmd = std::string(VOXCONE_CLI_PATH) + " " + args + " >/dev/null 2>" + errFile;
+  const int status = std::system(cmd.c_str());
+  std::ifstream f(errFile);
+  std::string err((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, err};
+}
+
+fs::path freshDir(const std::string& name) {
+  const fs::path d = fs::path(::testing::TempDir()) / name;
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+TEST(Cli, RenderWritesExrPngAndSidecar) {
+  const fs::path d = freshDir("cli_render");
+  const RunResult r = run("render " + test::sourceDir() + "/data/scenes/cornell-box.json -q --res 24x16 --spp 2 -t 2 --seed 7 -o " +
+                          (d / "img").string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(d / "img.exr"));
+  EXPECT_TRUE(fs::exists(d / "img.png"));
+  std::ifstream f(d / "img.json");
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j["settings"]["width"], 24);
+  EXPECT_EQ(j["settings"]["height"], 16);
+  EXPECT_EQ(j["seed"], 7);
+  EXPECT_EQ(j["method"], "path");
+  EXPECT_GT(j["timings"]["render_seconds"].get<double>(), 0.0);
+  EXPECT_GT(j["peak_rss_bytes"].get<double>(), 0.0);
+  EXPECT_EQ(j["stats"]["scene"]["triangles"], 32);
+  // Nothing else (no temporary files) is left in the folder.
+  EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 3);
+}
+
+TEST(Cli, BadInputGivesOneLineAndNoOutput) {
+  const fs::path d = freshDir("cli_bad");
+  const std::string scenes = test::sourceDir() + "/data/scenes/";
+  {
+    std::ofstream(d / "broken.json") << "{\"camera\": ";
+    std::ofstream(d / "badmesh.json") << R"({"camera": {"position": [0,0,-1], "target": [0,0,0]},
+      "materials": {"m": {"type": "lambertian", "emission": 1}},
+      "shapes": [{"type": "mesh", "file": "missing.obj", "material": "m"}]})";
+  }
+  const std::vector<std::string> bad = {
+      "render /nonexistent.json -q -o " + (d / "a").string(),
+      "render " + (d / "broken.json").string() + " -q -o " + (d / "b").string(),
+      "render " + (d / "badmesh.json").string() + " -q -o " + (d / "c").string(),
+      "render " + scenes + "cornell-box.json -q --method nope -o " + (d / "d").string(),
+      "render " + scenes + "cornell-box.json -q --res 0x10 -o " + (d / "e").string(),
+      "render " + scenes + "cornell-box.json -q --res banana -o " + (d / "f").string(),
+      "render " + scenes + "cornell-box.json -q --options '{\"x\":1}' -o " + (d / "g").string(),
+      "render " + scenes + "cornell-box.json -q -o /nonexistent-dir/x",
+      "info /nonexistent.json",
+      "compare /nonexistent1.exr /nonexistent2.exr",
+  };
+  for (const std::string& args : bad) {
+    const RunResult r = run(args);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.code, -1) << args << " crashed";
+    EXPECT_FALSE(r.err.empty()) << args;
+    // One line of error (CLI11 usage errors may add a hint line).
+    EXPECT_LE(std::count(r.err.begin(), r.err.end(), '\n'), 2) << args << ": " << r.err;
+  }
+  // Only the two input files remain: no output, no temporaries.
+  EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 2);
+}
+
+TEST(Cli, InfoPrintsHbvhStatistics) {
+  const std::string out = ::testing::TempDir() + "/info.json";
+  const std::string cmd = std::string(VOXCONE_CLI_PATH) + " info --json " + test::sourceDir() +
+                          "/data/scenes/cornell-box.json > " + out;
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  std::ifstream f(out);
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j["scene"]["triangles"], 32);
+  EXPECT_EQ(j["hbvh"]["triangles"], 32);
+  EXPECT_EQ(j["hbvh"]["nodes"].get<int>(), 2 * j["hbvh"]["leaves"].get<int>() - 1);
+}
+
+}  // namespace
+}  // namespace voxcone
