@@ -242,6 +242,7 @@ Bounds3 Hbvh::bounds() const {
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
+  static_assert(64 <= kCountMask, "leaf counts must fit the node's count bits");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (triangles.size() >= (1u << 31)) throw SettingsError("HBVH: too many triangles");
   Timer timer;
@@ -315,18 +316,13 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
       stack.push_back({bn.right.get(), idx, it.depth + 1});
       stack.push_back({bn.left.get(), UINT32_MAX, it.depth + 1});
     }
-    if (bn.hasSphere) {
-      n.count |= kSphereBit;
-      ++m_stats.sphereNodes;
+    if (bn.hasSphere && m_spheres.size() + 1 < (1u << (32 - kSphereShift))) {
+      m_spheres.emplace_back(bn.sphere.center, bn.sphere.radius);
+      n.count |= static_cast<uint32_t>(m_spheres.size()) << kSphereShift;
     }
     m_nodes.push_back(n);
-    m_spheres.emplace_back(bn.sphere.center, bn.sphere.radius);
   }
-  // Spheres are only stored when some node uses them.
-  if (m_stats.sphereNodes == 0) {
-    m_spheres.clear();
-    m_spheres.shrink_to_fit();
-  }
+  m_stats.sphereNodes = m_spheres.size();
   m_stats.nodes = m_nodes.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(m_triIds.size()) / double(m_stats.leaves) : 0.0;
   m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_triVerts.size() * sizeof(Vec3) +

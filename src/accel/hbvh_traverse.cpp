@@ -30,18 +30,18 @@ struct RayBoxData {
 constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
 
 /// Entry distance into the node's volume within [tMin, tMax], or +inf when missed.
-inline float enterNode(const Hbvh::Node& n, const Vec4* spheres, uint32_t idx, const RayBoxData& rb, float tMin,
-                       float tMax) {
+inline float enterNode(const Hbvh::Node& n, const Vec4* spheres, const RayBoxData& rb, float tMin, float tMax) {
   const Vec3 t0 = (n.lo - rb.org) * rb.invDir;
   const Vec3 t1 = (n.hi - rb.org) * rb.invDir;
   const Vec3 tn = glm::min(t0, t1), tf = glm::max(t0, t1);
   const float tNear = std::max(std::max(tn.x, tn.y), std::max(tn.z, tMin));
   const float tFar = std::min(std::min(tf.x, tf.y), tf.z) * kSlabScale;
   if (!(tNear <= std::min(tFar, tMax))) return kInf;
-  if (!(n.count & Hbvh::kSphereBit)) return tNear;
+  const uint32_t sphere = n.sphereIndexPlusOne();
+  if (sphere == 0) return tNear;
   // Sphere: distance of closest approach along the unit direction (Haines et al., "Precision
   // Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7), in units of |dir|.
-  const Vec4& s = spheres[idx];
+  const Vec4& s = spheres[sphere - 1];
   const Vec3 f = rb.org - Vec3(s);
   const float b = -glm::dot(f, rb.dirUnit);
   const Vec3 l = f + b * rb.dirUnit;
@@ -75,11 +75,11 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   };
   Entry stack[64];
   int sp = 0;
-  if (enterNode(nodes[0], spheres, 0, rb, ray.tMin, tMax) == kInf) return std::nullopt;
+  if (enterNode(nodes[0], spheres, rb, ray.tMin, tMax) == kInf) return std::nullopt;
   uint32_t cur = 0;
   for (;;) {
     const Node& n = nodes[cur];
-    const uint32_t count = n.count & ~kSphereBit;
+    const uint32_t count = n.triangleCount();
     if (count > 0) {
       // Leaf: test its triangles, shrinking tMax.
       const Vec3* v = &m_triVerts[3 * size_t(n.offset)];
@@ -97,8 +97,8 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
     } else {
       // Interior: visit the nearer child first, keep the other on the stack.
       const uint32_t l = cur + 1, r = n.offset;
-      const float tl = enterNode(nodes[l], spheres, l, rb, ray.tMin, tMax);
-      const float tr = enterNode(nodes[r], spheres, r, rb, ray.tMin, tMax);
+      const float tl = enterNode(nodes[l], spheres, rb, ray.tMin, tMax);
+      const float tr = enterNode(nodes[r], spheres, rb, ray.tMin, tMax);
       if (tl != kInf && tr != kInf) {
         if (tl <= tr) {
           stack[sp++] = {r, tr};
@@ -138,11 +138,11 @@ bool Hbvh::occluded(const Ray& ray, float tMaxIn) const {
   const Vec4* spheres = m_spheres.data();
   uint32_t stack[64];
   int sp = 0;
-  if (enterNode(nodes[0], spheres, 0, rb, ray.tMin, tMaxIn) == kInf) return false;
+  if (enterNode(nodes[0], spheres, rb, ray.tMin, tMaxIn) == kInf) return false;
   uint32_t cur = 0;
   for (;;) {
     const Node& n = nodes[cur];
-    const uint32_t count = n.count & ~kSphereBit;
+    const uint32_t count = n.triangleCount();
     if (count > 0) {
       const Vec3* v = &m_triVerts[3 * size_t(n.offset)];
       for (uint32_t i = 0; i < count; ++i, v += 3) {
@@ -151,8 +151,8 @@ bool Hbvh::occluded(const Ray& ray, float tMaxIn) const {
       }
     } else {
       const uint32_t l = cur + 1, r = n.offset;
-      const float tl = enterNode(nodes[l], spheres, l, rb, ray.tMin, tMaxIn);
-      const float tr = enterNode(nodes[r], spheres, r, rb, ray.tMin, tMaxIn);
+      const float tl = enterNode(nodes[l], spheres, rb, ray.tMin, tMaxIn);
+      const float tr = enterNode(nodes[r], spheres, rb, ray.tMin, tMaxIn);
       if (tl != kInf) {
         if (tr != kInf) stack[sp++] = tl <= tr ? r : l;
         cur = (tr != kInf && tr < tl) ? r : l;

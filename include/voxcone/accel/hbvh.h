@@ -63,9 +63,14 @@ public:
     Vec3 lo;
     uint32_t offset;  ///< leaf: first triangle slot; interior: index of the right child
     Vec3 hi;
-    uint32_t count;   ///< leaf: triangle count (>0); interior: 0; bit 31: has a sphere
+    /// Bits 0-6: leaf triangle count (> 0), 0 for an interior node. Bits 7-31: index + 1 of
+    /// the node's bounding sphere in the compact sphere array, 0 for none.
+    uint32_t count;
+    uint32_t triangleCount() const { return count & kCountMask; }
+    uint32_t sphereIndexPlusOne() const { return count >> kSphereShift; }
   };
-  static constexpr uint32_t kSphereBit = 0x80000000u;
+  static constexpr uint32_t kCountMask = 0x7fu;
+  static constexpr uint32_t kSphereShift = 7;
 
   Hbvh() = default;
   /// Build over positions/triangles (world space). Triangles with non-finite or degenerate
@@ -91,7 +96,7 @@ private:
   HbvhBuildSettings m_settings;
   HbvhStats m_stats;
   std::vector<Node> m_nodes;
-  std::vector<Vec4> m_spheres;      ///< per node: centre xyz, radius w (used where kSphereBit)
+  std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for nodes that keep one
   std::vector<Vec3> m_triVerts;     ///< 3 per slot, in leaf order
   std::vector<uint32_t> m_triIds;   ///< per slot: the original triangle index
 };
