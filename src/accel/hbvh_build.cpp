@@ -32,14 +32,12 @@ struct PrimRef {
 
 struct BuildNode {
   Bounds3 box;
-  Sphere sphere;
-  bool hasSphere = false;
-  uint32_t first = 0, count = 0;  // leaf range in the ref array
+  uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
   std::unique_ptr<BuildNode> left, right;
   bool leaf() const { return !left; }
 };
 
-constexpr int kMaxDepth = 60;  // traversal stacks hold 64 entries
+constexpr int kMaxDepth = 60;  // binary depth; the 4-wide tree is shallower, stacks hold 3 per level
 
 class Builder {
 public:
@@ -52,16 +50,19 @@ public:
     auto node = std::make_unique<BuildNode>();
     const auto [box, cbox] = rangeBounds(begin, end);
     node->box = box;
+    node->first = begin;
+    node->count = end - begin;
     const uint32_t count = end - begin;
-    if (m_s.sphereAreaRatio > 0.0f) computeSphere(*node, begin, end);
 
     const float leafCost = m_s.intersectionCost * static_cast<float>(count);
     int bestAxis = -1, bestSplit = -1;
     float bestCost = kInf;
     if (count > 1 && depth < kMaxDepth) findSplit(begin, end, box, cbox, bestAxis, bestSplit, bestCost);
 
-    const bool mustSplit = count > static_cast<uint32_t>(m_s.maxLeafSize) && depth < kMaxDepth;
-    if (count == 1 || depth >= kMaxDepth || (!mustSplit && leafCost <= bestCost)) {
+    // Past kMaxDepth only oversized leaves are split further, at the median: the depth stays
+    // below kMaxDepth + log2(triangles).
+    const bool mustSplit = count > static_cast<uint32_t>(m_s.maxLeafSize);
+    if (count == 1 || (!mustSplit && (depth >= kMaxDepth || leafCost <= bestCost))) {
       makeLeaf(*node, begin, end);
       return node;
     }
@@ -180,26 +181,8 @@ private:
     }
   }
 
-  /// Sphere centred on the vertices' box; kept when its area is small enough against the AABB's.
-  void computeSphere(BuildNode& node, uint32_t begin, uint32_t end) const {
-    const Vec3 c = node.box.center();
-    float r2 = 0.0f;
-    for (uint32_t i = begin; i < end; ++i) {
-      const UVec3& t = m_tris[refs[i].id];
-      r2 = std::max({r2, glm::dot(m_pos[t.x] - c, m_pos[t.x] - c), glm::dot(m_pos[t.y] - c, m_pos[t.y] - c),
-                     glm::dot(m_pos[t.z] - c, m_pos[t.z] - c)});
-    }
-    // Inflate by a relative 1e-5 so that float rounding in the ray-sphere test never culls a
-    // triangle the AABB test would keep.
-    node.sphere.center = c;
-    node.sphere.radius = std::sqrt(r2) * (1.0f + 1e-5f) + 1e-30f;
-    node.hasSphere = node.sphere.area() < m_s.sphereAreaRatio * node.box.area();
-  }
-
   void makeLeaf(BuildNode& node, uint32_t begin, uint32_t end) {
-    node.first = begin;
-    node.count = end - begin;
-    if (m_progress) m_progress->advance(node.count);
+    if (m_progress) m_progress->advance(end - begin);
   }
 
   const std::vector<Vec3>& m_pos;
@@ -210,11 +193,118 @@ private:
 
 }  // namespace
 
+/// Collapses the binary build tree into 4-wide nodes: each node takes its two children and
+/// repeatedly opens the inner child of largest surface area until it has four (the usual
+/// BVH2 -> BVH4 collapse; Wald et al. 2008, "Getting Rid of Packets").
+struct Hbvh::Flattener {
+  Hbvh& bvh;
+  const std::vector<PrimRef>& refs;
+  const std::vector<Vec3>& pos;
+  const std::vector<UVec3>& tris;
+  uint64_t leaves = 0, binaryNodes = 0;
+  int maxDepth = 0;
+
+  /// SAH cost of the binary subtree, relative to the root's area.
+  double sah(const BuildNode& n, float rootArea) {
+    ++binaryNodes;
+    const double rel = n.box.area() / rootArea;
+    if (n.leaf()) return rel * bvh.m_settings.intersectionCost * n.count;
+    return rel * bvh.m_settings.traversalCost + sah(*n.left, rootArea) + sah(*n.right, rootArea);
+  }
+
+  uint32_t emitSubtree(const BuildNode& n, int depth) {
+    const BuildNode* kids[4] = {n.left.get(), n.right.get(), nullptr, nullptr};
+    int k = 2;
+    while (k < 4) {
+      int best = -1;
+      float bestArea = -1.0f;
+      for (int i = 0; i < k; ++i)
+        if (!kids[i]->leaf() && kids[i]->box.area() > bestArea) {
+          best = i;
+          bestArea = kids[i]->box.area();
+        }
+      if (best < 0) break;
+      const BuildNode* opened = kids[best];
+      kids[best] = opened->left.get();
+      kids[k++] = opened->right.get();
+    }
+    return emitNode(kids, k, depth);
+  }
+
+  uint32_t emitNode(const BuildNode* const* kids, int k, int depth) {
+    maxDepth = std::max(maxDepth, depth);
+    const uint32_t idx = static_cast<uint32_t>(bvh.m_nodes.size());
+    bvh.m_nodes.emplace_back();
+    Node4 node;
+    for (int a = 0; a < 3; ++a)
+      for (int i = 0; i < 4; ++i) {
+        node.lo[a][i] = kInf;
+        node.hi[a][i] = -kInf;
+      }
+    node.sphereBase = static_cast<uint32_t>(bvh.m_spheres.size());
+    node.sphereMask = 0;
+    for (int i = 0; i < 4; ++i) node.child[i] = kLeafBit;  // empty slots are never entered
+    for (int i = 0; i < k; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        node.lo[a][i] = kids[i]->box.lo[a];
+        node.hi[a][i] = kids[i]->box.hi[a];
+      }
+      Sphere sphere;
+      if (fitSphere(*kids[i], sphere)) {
+        bvh.m_spheres.emplace_back(sphere.center, sphere.radius);
+        node.sphereMask |= 1u << i;
+      }
+    }
+    for (int i = 0; i < k; ++i) {
+      const BuildNode& c = *kids[i];
+      if (c.leaf()) {
+        const uint32_t slot = static_cast<uint32_t>(bvh.m_triIds.size());
+        for (uint32_t j = c.first; j < c.first + c.count; ++j) {
+          const uint32_t id = refs[j].id;
+          bvh.m_triIds.push_back(id);
+          bvh.m_triVerts.push_back(pos[tris[id].x]);
+          bvh.m_triVerts.push_back(pos[tris[id].y]);
+          bvh.m_triVerts.push_back(pos[tris[id].z]);
+        }
+        node.child[i] = kLeafBit | ((c.count - 1u) << kCountShift) | slot;
+        ++leaves;
+      } else {
+        node.child[i] = emitSubtree(c, depth + 1);
+      }
+    }
+    bvh.m_nodes[idx] = node;
+    return idx;
+  }
+
+  /// A sphere centred on the box, through the farthest vertex, when its surface area is below
+  /// sphereAreaRatio times the box's. A box touched on both faces of its widest axis needs a
+  /// sphere of diameter >= that extent, so most boxes are rejected before any vertex is read.
+  bool fitSphere(const BuildNode& n, Sphere& out) const {
+    const float ratio = bvh.m_settings.sphereAreaRatio;
+    if (!(ratio > 0.0f)) return false;
+    const float boxArea = n.box.area();
+    const float widest = maxComponent(n.box.diagonal());
+    if (kPi * widest * widest >= ratio * boxArea) return false;
+    const Vec3 c = n.box.center();
+    float r2 = 0.0f;
+    for (uint32_t i = n.first; i < n.first + n.count; ++i) {
+      const UVec3& t = tris[refs[i].id];
+      for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(pos[t[k]] - c, pos[t[k]] - c));
+    }
+    // Inflate by a relative 1e-5 so that float rounding in the sphere test never culls what
+    // the box test keeps.
+    out.center = c;
+    out.radius = std::sqrt(r2) * (1.0f + 1e-5f) + 1e-30f;
+    return out.area() < ratio * boxArea;
+  }
+};
+
 nlohmann::json HbvhStats::toJson() const {
   nlohmann::json j;
   j["triangles"] = triangles;
   j["nodes"] = nodes;
   j["leaves"] = leaves;
+  j["binary_nodes"] = binaryNodes;
   j["sphere_nodes"] = sphereNodes;
   j["max_depth"] = maxDepth;
   j["sah_cost"] = sahCost;
@@ -235,16 +325,23 @@ Hbvh::Hbvh(const Scene& scene, const HbvhBuildSettings& settings, Progress* prog
 }
 
 Bounds3 Hbvh::bounds() const {
-  if (m_nodes.empty()) return Bounds3();
-  return Bounds3(m_nodes[0].lo, m_nodes[0].hi);
+  Bounds3 b;
+  if (m_nodes.empty()) return b;
+  const Node4& root = m_nodes[0];
+  for (int i = 0; i < 4; ++i)
+    if (root.lo[0][i] <= root.hi[0][i]) {
+      b.extend(Vec3(root.lo[0][i], root.lo[1][i], root.lo[2][i]));
+      b.extend(Vec3(root.hi[0][i], root.hi[1][i], root.hi[2][i]));
+    }
+  return b;
 }
 
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
-  static_assert(64 <= kCountMask, "leaf counts must fit the node's count bits");
+  static_assert((kLeafBit >> kCountShift) == 64, "leaf counts 1..64 must fit between the leaf bit and the slot");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
-  if (triangles.size() >= (1u << 31)) throw SettingsError("HBVH: too many triangles");
+  if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");
   Timer timer;
   Builder builder(positions, triangles, s, progress);
 
@@ -276,56 +373,25 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   }
   std::unique_ptr<BuildNode> root = builder.build(0, static_cast<uint32_t>(builder.refs.size()), 0);
 
-  // Flatten depth first: the left child follows its parent; leaves get consecutive slots.
+  // Collapse to 4 children per node and flatten depth first.
   m_triVerts.reserve(3 * builder.refs.size());
   m_triIds.reserve(builder.refs.size());
-  const float rootArea = std::max(root->box.area(), 1e-30f);
-  struct Item {
-    const BuildNode* node;
-    uint32_t parent;  // index of the parent whose right child this is, or UINT32_MAX
-    int depth;
-  };
-  std::vector<Item> stack{{root.get(), UINT32_MAX, 1}};
-  while (!stack.empty()) {
-    const Item it = stack.back();
-    stack.pop_back();
-    const uint32_t idx = static_cast<uint32_t>(m_nodes.size());
-    if (it.parent != UINT32_MAX) m_nodes[it.parent].offset = idx;
-    const BuildNode& bn = *it.node;
-    Node n{};
-    n.lo = bn.box.lo;
-    n.hi = bn.box.hi;
-    m_stats.maxDepth = std::max(m_stats.maxDepth, it.depth);
-    const float relArea = bn.box.area() / rootArea;
-    if (bn.leaf()) {
-      n.offset = static_cast<uint32_t>(m_triIds.size());
-      n.count = bn.count;
-      for (uint32_t i = bn.first; i < bn.first + bn.count; ++i) {
-        const uint32_t id = builder.refs[i].id;
-        m_triIds.push_back(id);
-        m_triVerts.push_back(positions[triangles[id].x]);
-        m_triVerts.push_back(positions[triangles[id].y]);
-        m_triVerts.push_back(positions[triangles[id].z]);
-      }
-      ++m_stats.leaves;
-      m_stats.sahCost += relArea * s.intersectionCost * bn.count;
-    } else {
-      n.offset = 0;  // patched when the right child is emitted
-      n.count = 0;
-      m_stats.sahCost += relArea * s.traversalCost;
-      stack.push_back({bn.right.get(), idx, it.depth + 1});
-      stack.push_back({bn.left.get(), UINT32_MAX, it.depth + 1});
-    }
-    if (bn.hasSphere && m_spheres.size() + 1 < (1u << (32 - kSphereShift))) {
-      m_spheres.emplace_back(bn.sphere.center, bn.sphere.radius);
-      n.count |= static_cast<uint32_t>(m_spheres.size()) << kSphereShift;
-    }
-    m_nodes.push_back(n);
+  Flattener flat{*this, builder.refs, positions, triangles};
+  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f));
+  if (root->leaf()) {
+    // A single leaf still needs a node to hold its box.
+    const BuildNode* only[1] = {root.get()};
+    flat.emitNode(only, 1, 1);
+  } else {
+    flat.emitSubtree(*root, 1);
   }
-  m_stats.sphereNodes = m_spheres.size();
   m_stats.nodes = m_nodes.size();
+  m_stats.leaves = flat.leaves;
+  m_stats.binaryNodes = flat.binaryNodes;
+  m_stats.maxDepth = flat.maxDepth;
+  m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(m_triIds.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_triVerts.size() * sizeof(Vec3) +
+  m_stats.bytes = m_nodes.size() * sizeof(Node4) + m_spheres.size() * sizeof(Vec4) + m_triVerts.size() * sizeof(Vec3) +
                   m_triIds.size() * sizeof(uint32_t);
   // Free the build tree in parallel-friendly order before timing stops.
   root.reset();

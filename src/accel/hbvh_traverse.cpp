@@ -1,165 +1,180 @@
-// HBVH traversal: ordered depth-first with an explicit stack. A child is entered when the ray
-// passes its AABB (robust slab test, Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2)) and, if
-// it keeps one, its bounding sphere; the entry distance is the later of the two.
+// HBVH traversal over 4-wide nodes. The four child boxes of a node are tested at once with SSE
+// (robust slab test, Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the exit distance is
+// widened by 1 + 2 gamma(3)); a child that keeps a bounding sphere must also be entered by the
+// ray's sphere interval. Closest-hit traversal visits the hit children nearest first.
 
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/accel/triangle.h"
+
+#include <smmintrin.h>
 
 namespace voxcone {
 
 namespace {
 
+/// 1 + 2 gamma(3) (Ize 2013, sec. 3.3).
+constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
+
 /// Per-ray constants of the box and sphere tests.
-struct RayBoxData {
-  Vec3 org, invDir, dirUnit;
+struct RayData {
+  __m128 org[3], invDir[3];
+  int nearIsHi[3];  // per axis: the entry plane is the box's hi side (negative direction)
+  Vec3 origin, dirUnit;
   float invLen;
-  explicit RayBoxData(const Ray& r) : org(r.origin) {
-    // A zero component becomes a tiny one so that 0 * inf never makes a NaN slab distance.
-    Vec3 d = r.dir;
-    for (int i = 0; i < 3; ++i)
-      if (std::fabs(d[i]) < 1e-30f) d[i] = std::copysign(1e-30f, d[i]);
-    invDir = 1.0f / d;
+  explicit RayData(const Ray& r) : origin(r.origin) {
+    for (int a = 0; a < 3; ++a) {
+      // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance.
+      float d = r.dir[a];
+      if (std::fabs(d) < 1e-30f) d = std::copysign(1e-30f, d);
+      org[a] = _mm_set1_ps(r.origin[a]);
+      invDir[a] = _mm_set1_ps(1.0f / d);
+      nearIsHi[a] = d < 0.0f;
+    }
     const float len = glm::length(r.dir);
     invLen = 1.0f / len;
     dirUnit = r.dir * invLen;
   }
 };
 
-/// 1 + 2 gamma(3): widens the slab exit so that rounding never misses a box the exact
-/// ray passes (Ize 2013, sec. 3.3).
-constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
-
-/// Entry distance into the node's volume within [tMin, tMax], or +inf when missed.
-inline float enterNode(const Hbvh::Node& n, const Vec4* spheres, const RayBoxData& rb, float tMin, float tMax) {
-  const Vec3 t0 = (n.lo - rb.org) * rb.invDir;
-  const Vec3 t1 = (n.hi - rb.org) * rb.invDir;
-  const Vec3 tn = glm::min(t0, t1), tf = glm::max(t0, t1);
-  const float tNear = std::max(std::max(tn.x, tn.y), std::max(tn.z, tMin));
-  const float tFar = std::min(std::min(tf.x, tf.y), tf.z) * kSlabScale;
-  if (!(tNear <= std::min(tFar, tMax))) return kInf;
-  const uint32_t sphere = n.sphereIndexPlusOne();
-  if (sphere == 0) return tNear;
-  // Sphere: distance of closest approach along the unit direction (Haines et al., "Precision
-  // Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7), in units of |dir|.
-  const Vec4& s = spheres[sphere - 1];
-  const Vec3 f = rb.org - Vec3(s);
-  const float b = -glm::dot(f, rb.dirUnit);
-  const Vec3 l = f + b * rb.dirUnit;
-  // Rounding in l grows with the distance |f| to the centre, not with the radius: widen the
-  // radius by 1e-6 |f| (several ulps of |f|) so a ray grazing a vertex on the sphere is kept.
-  const float rEff = s.w + 1e-6f * std::sqrt(glm::dot(f, f));
-  const float disc = rEff * rEff - glm::dot(l, l);
-  if (disc < 0.0f) return kInf;
-  const float h = std::sqrt(disc);
-  const float sNear = (b - h) * rb.invLen, sFar = (b + h) * rb.invLen;
-  const float enter = std::max(tNear, sNear);
-  if (enter > std::min(sFar, tMax) || sFar < tMin) return kInf;
-  return enter;
+/// Entry distances of the four children (+inf where missed) and the mask of those entered.
+inline int enterChildren(const Hbvh::Node4& n, const Vec4* spheres, const RayData& rd, float tMin, float tMax,
+                         float tNearOut[4]) {
+  __m128 tNear = _mm_set1_ps(tMin);
+  __m128 tFar = _mm_set1_ps(kInf);
+  for (int a = 0; a < 3; ++a) {
+    const __m128 nearPlane = _mm_load_ps(rd.nearIsHi[a] ? n.hi[a] : n.lo[a]);
+    const __m128 farPlane = _mm_load_ps(rd.nearIsHi[a] ? n.lo[a] : n.hi[a]);
+    tNear = _mm_max_ps(tNear, _mm_mul_ps(_mm_sub_ps(nearPlane, rd.org[a]), rd.invDir[a]));
+    tFar = _mm_min_ps(tFar, _mm_mul_ps(_mm_sub_ps(farPlane, rd.org[a]), rd.invDir[a]));
+  }
+  tFar = _mm_min_ps(_mm_mul_ps(tFar, _mm_set1_ps(kSlabScale)), _mm_set1_ps(tMax));
+  int mask = _mm_movemask_ps(_mm_cmple_ps(tNear, tFar));
+  _mm_storeu_ps(tNearOut, tNear);
+  if (mask & n.sphereMask) {
+    // Spheres: distance of closest approach along the unit direction (Haines et al.,
+    // "Precision Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7).
+    uint32_t sphereIdx = n.sphereBase;
+    for (int i = 0; i < 4; ++i) {
+      if (!(n.sphereMask & (1u << i))) continue;
+      const Vec4& s = spheres[sphereIdx++];
+      if (!(mask & (1 << i))) continue;
+      const Vec3 f = rd.origin - Vec3(s);
+      const float b = -glm::dot(f, rd.dirUnit);
+      const Vec3 l = f + b * rd.dirUnit;
+      // Rounding in l grows with |f|, not with the radius: widen the radius by 1e-6 |f|.
+      const float rEff = s.w + 1e-6f * std::sqrt(glm::dot(f, f));
+      const float disc = rEff * rEff - glm::dot(l, l);
+      bool hit = disc >= 0.0f;
+      if (hit) {
+        const float h = std::sqrt(disc);
+        const float sNear = (b - h) * rd.invLen, sFar = (b + h) * rd.invLen;
+        tNearOut[i] = std::max(tNearOut[i], sNear);
+        hit = tNearOut[i] <= std::min(sFar, tMax) && sFar >= tMin;
+      }
+      if (!hit) mask &= ~(1 << i);
+    }
+  }
+  return mask;
 }
+
+/// Stack depth: at most 3 entries per 4-wide level; levels < 60 + log2(2^25) (see the build).
+constexpr int kStackSize = 256;
 
 }  // namespace
 
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
-  const RayBoxData rb(ray);
+  const RayData rd(ray);
   const WatertightRay wr(ray.dir);
-  const Node* nodes = m_nodes.data();
+  const Node4* nodes = m_nodes.data();
   const Vec4* spheres = m_spheres.data();
   Hit hit;
   float tMax = ray.tMax;
   bool found = false;
 
   struct Entry {
-    uint32_t node;
+    uint32_t ref;
     float t;
   };
-  Entry stack[64];
+  Entry stack[kStackSize];
   int sp = 0;
-  if (enterNode(nodes[0], spheres, rb, ray.tMin, tMax) == kInf) return std::nullopt;
-  uint32_t cur = 0;
+  uint32_t cur = 0;  // the root node
   for (;;) {
-    const Node& n = nodes[cur];
-    const uint32_t count = n.triangleCount();
-    if (count > 0) {
+    if (cur & kLeafBit) {
       // Leaf: test its triangles, shrinking tMax.
-      const Vec3* v = &m_triVerts[3 * size_t(n.offset)];
+      const uint32_t slot = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
+      const Vec3* v = &m_triVerts[3 * size_t(slot)];
       for (uint32_t i = 0; i < count; ++i, v += 3) {
         float t, b1, b2;
         if (intersectTriangleWatertight(ray.origin, wr, v[0], v[1], v[2], ray.tMin, tMax, t, b1, b2)) {
           tMax = t;
-          hit.t = t;
-          hit.b1 = b1;
-          hit.b2 = b2;
-          hit.triangle = m_triIds[n.offset + i];
+          hit = {t, m_triIds[slot + i], b1, b2};
           found = true;
         }
       }
     } else {
-      // Interior: visit the nearer child first, keep the other on the stack.
-      const uint32_t l = cur + 1, r = n.offset;
-      const float tl = enterNode(nodes[l], spheres, rb, ray.tMin, tMax);
-      const float tr = enterNode(nodes[r], spheres, rb, ray.tMin, tMax);
-      if (tl != kInf && tr != kInf) {
-        if (tl <= tr) {
-          stack[sp++] = {r, tr};
-          cur = l;
-        } else {
-          stack[sp++] = {l, tl};
-          cur = r;
+      const Node4& n = nodes[cur];
+      float tNear[4];
+      int mask = enterChildren(n, spheres, rd, ray.tMin, tMax, tNear);
+      if (mask != 0) {
+        // Push the entered children farthest first; continue with the nearest.
+        int order[4], k = 0;
+        while (mask) {
+          const int i = __builtin_ctz(static_cast<unsigned>(mask));
+          mask &= mask - 1;
+          int j = k++;
+          while (j > 0 && tNear[order[j - 1]] < tNear[i]) {
+            order[j] = order[j - 1];
+            --j;
+          }
+          order[j] = i;
         }
-        continue;
-      }
-      if (tl != kInf) {
-        cur = l;
-        continue;
-      }
-      if (tr != kInf) {
-        cur = r;
+        for (int j = 0; j < k - 1; ++j) stack[sp++] = {n.child[order[j]], tNear[order[j]]};
+        cur = n.child[order[k - 1]];
         continue;
       }
     }
-    // Pop the next node still in front of the closest hit.
+    // Pop the next child still in front of the closest hit.
     for (;;) {
       if (sp == 0) return found ? std::optional<Hit>(hit) : std::nullopt;
       const Entry e = stack[--sp];
       if (e.t <= tMax) {
-        cur = e.node;
+        cur = e.ref;
         break;
       }
     }
   }
 }
 
-bool Hbvh::occluded(const Ray& ray, float tMaxIn) const {
+bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
-  const RayBoxData rb(ray);
+  const RayData rd(ray);
   const WatertightRay wr(ray.dir);
-  const Node* nodes = m_nodes.data();
+  const Node4* nodes = m_nodes.data();
   const Vec4* spheres = m_spheres.data();
-  uint32_t stack[64];
+  uint32_t stack[kStackSize];
   int sp = 0;
-  if (enterNode(nodes[0], spheres, rb, ray.tMin, tMaxIn) == kInf) return false;
   uint32_t cur = 0;
   for (;;) {
-    const Node& n = nodes[cur];
-    const uint32_t count = n.triangleCount();
-    if (count > 0) {
-      const Vec3* v = &m_triVerts[3 * size_t(n.offset)];
+    if (cur & kLeafBit) {
+      const uint32_t slot = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
+      const Vec3* v = &m_triVerts[3 * size_t(slot)];
       for (uint32_t i = 0; i < count; ++i, v += 3) {
         float t, b1, b2;
-        if (intersectTriangleWatertight(ray.origin, wr, v[0], v[1], v[2], ray.tMin, tMaxIn, t, b1, b2)) return true;
+        if (intersectTriangleWatertight(ray.origin, wr, v[0], v[1], v[2], ray.tMin, tMax, t, b1, b2)) return true;
       }
     } else {
-      const uint32_t l = cur + 1, r = n.offset;
-      const float tl = enterNode(nodes[l], spheres, rb, ray.tMin, tMaxIn);
-      const float tr = enterNode(nodes[r], spheres, rb, ray.tMin, tMaxIn);
-      if (tl != kInf) {
-        if (tr != kInf) stack[sp++] = tl <= tr ? r : l;
-        cur = (tr != kInf && tr < tl) ? r : l;
-        continue;
-      }
-      if (tr != kInf) {
-        cur = r;
+      const Node4& n = nodes[cur];
+      float tNear[4];
+      int mask = enterChildren(n, spheres, rd, ray.tMin, tMax, tNear);
+      if (mask != 0) {
+        // Any hit ends the query, so order does not matter: take the first, push the rest.
+        cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
+        mask &= mask - 1;
+        while (mask) {
+          stack[sp++] = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
+          mask &= mask - 1;
+        }
         continue;
       }
     }

@@ -188,9 +188,12 @@ TEST(Hbvh, StatsAreConsistent) {
   const Hbvh bvh(s.pos, s.tris);
   const HbvhStats& st = bvh.stats();
   EXPECT_EQ(st.triangles, 5000u);
-  EXPECT_EQ(st.nodes, 2 * st.leaves - 1);  // a full binary tree
-  EXPECT_GT(st.maxDepth, 5);
-  EXPECT_LE(st.maxDepth, 61);
+  EXPECT_EQ(st.binaryNodes, 2 * st.leaves - 1);  // the binary tree is full; collapsing keeps its leaves
+  // Each 4-wide node replaces 1-3 binary inner nodes: leaves - 1 = sum over nodes of (children - 1).
+  EXPECT_GE(st.nodes, (st.leaves - 1 + 2) / 3);
+  EXPECT_LE(st.nodes, st.leaves - 1);
+  EXPECT_GT(st.maxDepth, 3);
+  EXPECT_LE(st.maxDepth, 40);
   EXPECT_GT(st.sahCost, 1.0);
   EXPECT_GT(st.bytes, 5000u * 40u);
   EXPECT_LE(st.avgLeafSize, 8.0);

@@ -100,7 +100,7 @@ TEST(Cli, InfoPrintsHbvhStatistics) {
   const nlohmann::json j = nlohmann::json::parse(f);
   EXPECT_EQ(j["scene"]["triangles"], 32);
   EXPECT_EQ(j["hbvh"]["triangles"], 32);
-  EXPECT_EQ(j["hbvh"]["nodes"].get<int>(), 2 * j["hbvh"]["leaves"].get<int>() - 1);
+  EXPECT_EQ(j["hbvh"]["binary_nodes"].get<int>(), 2 * j["hbvh"]["leaves"].get<int>() - 1);
 }
 
 }  // namespace

@@ -1,7 +1,9 @@
 #pragma once
 /// \file hbvh.h
-/// The hybrid bounding volume hierarchy (HBVH): a binary SAH BVH over triangles whose nodes keep
+/// The hybrid bounding volume hierarchy (HBVH): a binned-SAH BVH over triangles whose nodes keep
 /// an AABB and, where it fits tighter, a bounding sphere; a ray must pass both to enter a node.
+/// Built binary, then collapsed to four children per node whose boxes are tested together with
+/// SSE (the layout of Embree's BVH4).
 /// Layout as in Embree's kernels/bvh: build settings and statistics are structs of their own,
 /// the split heuristic (hbvh_build.cpp), traversal (hbvh_traverse.cpp) and the primitive test
 /// (triangle.h) live apart.
@@ -36,11 +38,12 @@ struct HbvhBuildSettings {
 /// Statistics of a built HBVH (cf. Embree's BVHNStatistics).
 struct HbvhStats {
   uint64_t triangles = 0;
-  uint64_t nodes = 0;
+  uint64_t nodes = 0;         ///< 4-wide nodes
   uint64_t leaves = 0;
-  uint64_t sphereNodes = 0;   ///< nodes that keep a bounding sphere
-  int maxDepth = 0;
-  double sahCost = 0.0;       ///< SAH cost of the tree, relative to the root's area
+  uint64_t binaryNodes = 0;   ///< nodes of the binary tree before the collapse
+  uint64_t sphereNodes = 0;   ///< children (inner or leaf) that keep a bounding sphere
+  int maxDepth = 0;           ///< of the 4-wide tree, the root at depth 1
+  double sahCost = 0.0;       ///< SAH cost of the binary tree, relative to the root's area
   double avgLeafSize = 0.0;
   uint64_t bytes = 0;         ///< memory of nodes, spheres and triangle data
   double buildSeconds = 0.0;
@@ -57,20 +60,18 @@ struct Hit {
 /// The hybrid BVH over a triangle soup.
 class Hbvh {
 public:
-  /// Flat node, 32 bytes: bounds, then either the first triangle and count (leaf) or the
-  /// index of the second child (interior; the first child follows the node).
-  struct Node {
-    Vec3 lo;
-    uint32_t offset;  ///< leaf: first triangle slot; interior: index of the right child
-    Vec3 hi;
-    /// Bits 0-6: leaf triangle count (> 0), 0 for an interior node. Bits 7-31: index + 1 of
-    /// the node's bounding sphere in the compact sphere array, 0 for none.
-    uint32_t count;
-    uint32_t triangleCount() const { return count & kCountMask; }
-    uint32_t sphereIndexPlusOne() const { return count >> kSphereShift; }
+  /// 4-wide node, 128 bytes: the children's boxes side by side (one SSE register per plane).
+  struct alignas(64) Node4 {
+    float lo[3][4];          ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
+    float hi[3][4];
+    uint32_t child[4];       ///< node index, or kLeafBit | (count - 1) << kCountShift | first slot
+    uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
+    uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
-  static constexpr uint32_t kCountMask = 0x7fu;
-  static constexpr uint32_t kSphereShift = 7;
+  static constexpr uint32_t kLeafBit = 0x80000000u;
+  static constexpr uint32_t kCountShift = 25;  ///< leaves hold up to 64 triangles
+  static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;
+
 
   Hbvh() = default;
   /// Build over positions/triangles (world space). Triangles with non-finite or degenerate
@@ -92,11 +93,12 @@ public:
 
 private:
   void build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress);
+  struct Flattener;  ///< collapses the binary build tree into Node4s (hbvh_build.cpp)
 
   HbvhBuildSettings m_settings;
   HbvhStats m_stats;
-  std::vector<Node> m_nodes;
-  std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for nodes that keep one
+  std::vector<Node4> m_nodes;
+  std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
   std::vector<Vec3> m_triVerts;     ///< 3 per slot, in leaf order
   std::vector<uint32_t> m_triIds;   ///< per slot: the original triangle index
 };
