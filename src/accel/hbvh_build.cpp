@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <memory>
 #include <new>
 
@@ -54,7 +55,7 @@ public:
     node->count = end - begin;
     const uint32_t count = end - begin;
 
-    const float leafCost = m_s.intersectionCost * static_cast<float>(count);
+    const float leafCost = m_s.intersectionCost * static_cast<float>(packets(count));
     int bestAxis = -1, bestSplit = -1;
     float bestCost = kInf;
     if (count > 1 && depth < kMaxDepth) findSplit(begin, end, box, cbox, bestAxis, bestSplit, bestCost);
@@ -98,6 +99,9 @@ public:
   }
 
 private:
+  /// Number of 4-triangle packets holding n triangles.
+  static uint32_t packets(uint32_t n) { return (n + 3u) / 4u; }
+
   static int binOf(float c, float lo, float scale, int bins) {
     const int b = static_cast<int>((c - lo) * scale);
     return std::clamp(b, 0, bins - 1);
@@ -171,7 +175,8 @@ private:
         n += bin(axis, i - 1).count;
         if (n == 0 || rightCount[i] == 0) continue;
         const float cost = m_s.traversalCost +
-                           m_s.intersectionCost * invArea * (acc.area() * n + rightArea[i] * rightCount[i]);
+                           m_s.intersectionCost * invArea *
+                               (acc.area() * float(packets(n)) + rightArea[i] * float(packets(rightCount[i])));
         if (cost < bestCost) {
           bestCost = cost;
           bestAxis = axis;
@@ -208,7 +213,7 @@ struct Hbvh::Flattener {
   double sah(const BuildNode& n, float rootArea) {
     ++binaryNodes;
     const double rel = n.box.area() / rootArea;
-    if (n.leaf()) return rel * bvh.m_settings.intersectionCost * n.count;
+    if (n.leaf()) return rel * bvh.m_settings.intersectionCost * ((n.count + 3u) / 4u);
     return rel * bvh.m_settings.traversalCost + sah(*n.left, rootArea) + sah(*n.right, rootArea);
   }
 
@@ -258,15 +263,23 @@ struct Hbvh::Flattener {
     for (int i = 0; i < k; ++i) {
       const BuildNode& c = *kids[i];
       if (c.leaf()) {
-        const uint32_t slot = static_cast<uint32_t>(bvh.m_triIds.size());
-        for (uint32_t j = c.first; j < c.first + c.count; ++j) {
-          const uint32_t id = refs[j].id;
-          bvh.m_triIds.push_back(id);
-          bvh.m_triVerts.push_back(pos[tris[id].x]);
-          bvh.m_triVerts.push_back(pos[tris[id].y]);
-          bvh.m_triVerts.push_back(pos[tris[id].z]);
+        // Pack the leaf's triangles four to a packet; NaN vertices fill the unused lanes.
+        const uint32_t first = static_cast<uint32_t>(bvh.m_tris.size());
+        const uint32_t count = (c.count + 3u) / 4u;
+        for (uint32_t p = 0; p < count; ++p) {
+          Triangle4 t4;
+          for (int lane = 0; lane < 4; ++lane) {
+            const uint32_t j = c.first + 4 * p + static_cast<uint32_t>(lane);
+            const bool used = j < c.first + c.count;
+            t4.id[lane] = used ? refs[j].id : 0u;
+            for (int vtx = 0; vtx < 3; ++vtx) {
+              const Vec3 v = used ? pos[tris[refs[j].id][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
+              for (int a = 0; a < 3; ++a) t4.v[vtx][a][lane] = v[a];
+            }
+          }
+          bvh.m_tris.push_back(t4);
         }
-        node.child[i] = kLeafBit | ((c.count - 1u) << kCountShift) | slot;
+        node.child[i] = kLeafBit | ((count - 1u) << kCountShift) | first;
         ++leaves;
       } else {
         node.child[i] = emitSubtree(c, depth + 1);
@@ -339,9 +352,9 @@ Bounds3 Hbvh::bounds() const {
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
-  static_assert((kLeafBit >> kCountShift) == 64, "leaf counts 1..64 must fit between the leaf bit and the slot");
+  static_assert((kLeafBit >> kCountShift) == 64, "packet counts 1..64 must fit between the leaf bit and the slot");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
-  if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");
+  if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
   Builder builder(positions, triangles, s, progress);
 
@@ -362,8 +375,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
-  m_triVerts.clear();
-  m_triIds.clear();
+  m_tris.clear();
   m_stats = HbvhStats();
   m_stats.triangles = builder.refs.size();
   if (builder.refs.empty()) {
@@ -374,8 +386,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   std::unique_ptr<BuildNode> root = builder.build(0, static_cast<uint32_t>(builder.refs.size()), 0);
 
   // Collapse to 4 children per node and flatten depth first.
-  m_triVerts.reserve(3 * builder.refs.size());
-  m_triIds.reserve(builder.refs.size());
+  m_tris.reserve(builder.refs.size() / 2);
   Flattener flat{*this, builder.refs, positions, triangles};
   m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f));
   if (root->leaf()) {
@@ -390,9 +401,8 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_stats.binaryNodes = flat.binaryNodes;
   m_stats.maxDepth = flat.maxDepth;
   m_stats.sphereNodes = m_spheres.size();
-  m_stats.avgLeafSize = m_stats.leaves ? double(m_triIds.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(Node4) + m_spheres.size() * sizeof(Vec4) + m_triVerts.size() * sizeof(Vec3) +
-                  m_triIds.size() * sizeof(uint32_t);
+  m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
+  m_stats.bytes = m_nodes.size() * sizeof(Node4) + m_spheres.size() * sizeof(Vec4) + m_tris.size() * sizeof(Triangle4);
   // Free the build tree in parallel-friendly order before timing stops.
   root.reset();
   m_stats.buildSeconds = timer.seconds();

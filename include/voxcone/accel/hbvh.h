@@ -26,8 +26,11 @@ class Scene;
 struct HbvhBuildSettings {
   int binCount = 16;             ///< SAH bins per axis, [2, 256]
   int maxLeafSize = 8;           ///< leaves never hold more triangles, [1, 64]
-  float traversalCost = 1.0f;    ///< SAH cost of visiting a node, relative to one triangle test
-  float intersectionCost = 1.0f; ///< SAH cost of one triangle test
+  /// SAH cost of visiting a node, relative to one 4-triangle packet test. Leaves are costed in
+  /// packets of four (ceil(n/4)), as the SSE triangle test takes four at once (Embree's
+  /// block size).
+  float traversalCost = 1.0f;
+  float intersectionCost = 1.0f; ///< SAH cost of one 4-triangle packet test
   /// Keep a node's bounding sphere when its surface area is below this fraction of the AABB's
   /// (surface area is what decides how often a random ray enters a convex volume; Cauchy's
   /// formula). 0 disables spheres (a plain AABB BVH).
@@ -60,16 +63,23 @@ struct Hit {
 /// The hybrid BVH over a triangle soup.
 class Hbvh {
 public:
+  /// Four triangles side by side for the SSE watertight test; unused lanes hold NaN vertices
+  /// (never hit).
+  struct alignas(16) Triangle4 {
+    float v[3][3][4];  ///< [vertex][axis][lane]
+    uint32_t id[4];    ///< original triangle index per lane
+  };
+
   /// 4-wide node, 128 bytes: the children's boxes side by side (one SSE register per plane).
   struct alignas(64) Node4 {
     float lo[3][4];          ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][4];
-    uint32_t child[4];       ///< node index, or kLeafBit | (count - 1) << kCountShift | first slot
+    uint32_t child[4];       ///< node index, or kLeafBit | (packets - 1) << kCountShift | first packet
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
   static constexpr uint32_t kLeafBit = 0x80000000u;
-  static constexpr uint32_t kCountShift = 25;  ///< leaves hold up to 64 triangles
+  static constexpr uint32_t kCountShift = 25;  ///< leaves hold up to 64 packets
   static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;
 
 
@@ -99,8 +109,7 @@ private:
   HbvhStats m_stats;
   std::vector<Node4> m_nodes;
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
-  std::vector<Vec3> m_triVerts;     ///< 3 per slot, in leaf order
-  std::vector<uint32_t> m_triIds;   ///< per slot: the original triangle index
+  std::vector<Triangle4> m_tris;    ///< leaf triangles, four to a packet, in leaf order
 };
 
 }  // namespace voxcone
