@@ -42,8 +42,7 @@ constexpr int kMaxDepth = 60;  // binary depth; the 4-wide tree is shallower, st
 
 class Builder {
 public:
-  Builder(const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, const HbvhBuildSettings& s, Progress* p)
-      : m_pos(pos), m_tris(tris), m_s(s), m_progress(p) {}
+  Builder(const HbvhBuildSettings& s, Progress* p) : m_s(s), m_progress(p) {}
 
   std::vector<PrimRef> refs;
 
@@ -64,7 +63,7 @@ public:
     // below kMaxDepth + log2(triangles).
     const bool mustSplit = count > static_cast<uint32_t>(m_s.maxLeafSize);
     if (count == 1 || (!mustSplit && (depth >= kMaxDepth || leafCost <= bestCost))) {
-      makeLeaf(*node, begin, end);
+      if (m_progress) m_progress->advance(count);
       return node;
     }
     uint32_t mid;
@@ -186,12 +185,7 @@ private:
     }
   }
 
-  void makeLeaf(BuildNode& node, uint32_t begin, uint32_t end) {
-    if (m_progress) m_progress->advance(end - begin);
-  }
 
-  const std::vector<Vec3>& m_pos;
-  const std::vector<UVec3>& m_tris;
   const HbvhBuildSettings& m_s;
   Progress* m_progress;
 };
@@ -356,7 +350,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
-  Builder builder(positions, triangles, s, progress);
+  Builder builder(s, progress);
 
   // References for every triangle with finite, indexable vertices.
   builder.refs.reserve(triangles.size());

@@ -8,6 +8,8 @@
 
 #include <smmintrin.h>
 
+#include <cstddef>
+
 namespace voxcone {
 
 namespace {
@@ -18,7 +20,9 @@ constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x
 /// Per-ray constants of the box and sphere tests.
 struct RayData {
   __m128 org[3], invDir[3];
-  int nearIsHi[3];  // per axis: the entry plane is the box's hi side (negative direction)
+  // Per axis: byte offsets in a Node4 of the entry and exit planes (lo or hi by the sign of
+  // the direction), so the box test has no branch.
+  size_t nearOffset[3], farOffset[3];
   Vec3 origin, dirUnit;
   float invLen;
   explicit RayData(const Ray& r) : origin(r.origin) {
@@ -28,7 +32,10 @@ struct RayData {
       if (std::fabs(d) < 1e-30f) d = std::copysign(1e-30f, d);
       org[a] = _mm_set1_ps(r.origin[a]);
       invDir[a] = _mm_set1_ps(1.0f / d);
-      nearIsHi[a] = d < 0.0f;
+      const size_t lo = offsetof(Hbvh::Node4, lo) + a * sizeof(float[4]);
+      const size_t hi = offsetof(Hbvh::Node4, hi) + a * sizeof(float[4]);
+      nearOffset[a] = d < 0.0f ? hi : lo;
+      farOffset[a] = d < 0.0f ? lo : hi;
     }
     const float len = glm::length(r.dir);
     invLen = 1.0f / len;
@@ -42,8 +49,9 @@ inline int enterChildren(const Hbvh::Node4& n, const Vec4* spheres, const RayDat
   __m128 tNear = _mm_set1_ps(tMin);
   __m128 tFar = _mm_set1_ps(kInf);
   for (int a = 0; a < 3; ++a) {
-    const __m128 nearPlane = _mm_load_ps(rd.nearIsHi[a] ? n.hi[a] : n.lo[a]);
-    const __m128 farPlane = _mm_load_ps(rd.nearIsHi[a] ? n.lo[a] : n.hi[a]);
+    const char* base = reinterpret_cast<const char*>(&n);
+    const __m128 nearPlane = _mm_load_ps(reinterpret_cast<const float*>(base + rd.nearOffset[a]));
+    const __m128 farPlane = _mm_load_ps(reinterpret_cast<const float*>(base + rd.farOffset[a]));
     tNear = _mm_max_ps(tNear, _mm_mul_ps(_mm_sub_ps(nearPlane, rd.org[a]), rd.invDir[a]));
     tFar = _mm_min_ps(tFar, _mm_mul_ps(_mm_sub_ps(farPlane, rd.org[a]), rd.invDir[a]));
   }
