@@ -42,7 +42,7 @@ case "$cmd" in
     ./build/voxcone render "$@"
     ;;
   test)
-    install_deps python3-matplotlib
+    install_deps
     build ON
     ctest --test-dir build --output-on-failure -j "$(nproc)"
     ;;
