@@ -6,6 +6,8 @@
 
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
+
+#include "../support/temp_dir.h"
 #include <nlohmann/json.hpp>
 
 #include <unistd.h>
@@ -27,27 +29,14 @@ using namespace voxcone;
 namespace {
 
 /// A fresh empty directory per test, removed afterwards.
-class ImageIoTest : public ::testing::Test {
+class ImageIoTest : public test::TempDirTest {
 protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() /
-            ("voxcone-image-io-" + std::to_string(::getpid()) + "-" + info->name());
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(m_dir, ec);
-  }
-  std::string path(const std::string& name) const { return (m_dir / name).string(); }
   /// Names of every entry in the test directory (hidden temporaries included).
   std::vector<std::string> entries() const {
     std::vector<std::string> names;
     for (const auto& e : fs::directory_iterator(m_dir)) names.push_back(e.path().filename().string());
     return names;
   }
-  fs::path m_dir;
 };
 
 std::string readText(const std::string& path) {

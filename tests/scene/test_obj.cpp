@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/temp_dir.h"
+
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -19,24 +21,7 @@ using namespace voxcone;
 
 namespace {
 
-class ObjTest : public ::testing::Test {
-protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() /
-            ("voxcone_obj_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(m_dir, ec);
-  }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string path = (m_dir / name).string();
-    std::ofstream(path) << text;
-    return path;
-  }
-  fs::path m_dir;
+class ObjTest : public test::TempDirTest {
 };
 
 void expectMeshError(const std::string& path, const std::string& needle = "") {

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../support/temp_dir.h"
+
 #include <chrono>
 #include <cstdint>
 #include <cstring>
@@ -24,25 +26,7 @@ using namespace voxcone;
 namespace {
 
 /// A per-test temporary directory, removed at the end.
-class PlyTest : public ::testing::Test {
-protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() /
-            ("voxcone_ply_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(m_dir, ec);
-  }
-  std::string write(const std::string& name, const std::string& bytes) const {
-    const std::string path = (m_dir / name).string();
-    std::ofstream f(path, std::ios::binary);
-    f.write(bytes.data(), std::streamsize(bytes.size()));
-    return path;
-  }
-  fs::path m_dir;
+class PlyTest : public test::TempDirTest {
 };
 
 /// Appends scalars to a binary PLY body in the chosen byte order.
