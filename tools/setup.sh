@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PACKAGES=(build-essential cmake ninja-build pkg-config git
-  libopenvdb-dev libboost-iostreams-dev libopenimageio-dev libglm-dev libtbb-dev
+  libopenvdb-dev libopenvdb-tools libboost-iostreams-dev libopenimageio-dev libglm-dev libtbb-dev
   libtinyobjloader-dev libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev)
 
 install_deps() {
@@ -37,12 +37,12 @@ case "$cmd" in
   deps) install_deps ;;
   build) install_deps; build ON ;;
   render)
-    install_deps
+    install_deps python3-matplotlib
     build OFF
     ./build/voxcone render "$@"
     ;;
   test)
-    install_deps
+    install_deps python3-matplotlib
     build ON
     ctest --test-dir build --output-on-failure -j "$(nproc)"
     ;;

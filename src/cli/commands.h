@@ -8,5 +8,7 @@ namespace voxcone {
 void addRenderCommand(CLI::App& app);
 void addCompareCommand(CLI::App& app);
 void addInfoCommand(CLI::App& app);
+void addVoxelizeCommand(CLI::App& app);
+void addStudyCommand(CLI::App& app);
 
 }  // namespace voxcone

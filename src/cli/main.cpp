@@ -14,6 +14,8 @@ int main(int argc, char** argv) {
   voxcone::addRenderCommand(app);
   voxcone::addCompareCommand(app);
   voxcone::addInfoCommand(app);
+  voxcone::addVoxelizeCommand(app);
+  voxcone::addStudyCommand(app);
   voxcone::installInterruptHandler();
   try {
     app.parse(argc, argv);

@@ -1,0 +1,62 @@
+#pragma once
+/// \file photon_tracer.h
+/// Photon tracing from the lights (Jensen 2001, "Realistic Image Synthesis Using Photon
+/// Mapping", ch. 5): photons leave the lights in proportion to power, follow exact specular
+/// reflection/refraction through the HBVH, are stored at diffuse hits and survive diffuse
+/// bounces by Russian roulette on the albedo.
+
+#include "voxcone/core/math.h"
+#include "voxcone/core/progress.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+#include <cstdint>
+#include <vector>
+
+namespace voxcone {
+
+class Scene;
+class Hbvh;
+
+/// A photon stored at a diffuse surface hit.
+struct Photon {
+  Vec3 position{0.0f};   ///< world space
+  Vec3 power{0.0f};      ///< flux carried, W per RGB channel
+  Vec3 incident{0.0f};   ///< unit direction towards where the photon came from (away from the surface)
+  Vec3 normal{0.0f};     ///< unit shading normal, flipped to the side the photon arrived on
+};
+
+/// Photon tracing settings.
+struct PhotonSettings {
+  uint64_t photons = 200000;        ///< photons emitted for the global map
+  uint64_t causticPhotons = 100000; ///< photons emitted for the caustic map (0: none)
+  int maxDepth = 16;                ///< longest photon path (segments)
+  uint64_t seed = 0;                ///< photon i of pass p uses the stream (seed, p * 2^40 + i)
+};
+
+/// Statistics of one tracing run.
+struct PhotonStats {
+  uint64_t emittedGlobal = 0, emittedCaustic = 0;
+  uint64_t storedGlobal = 0, storedCaustic = 0;
+  Vec3 emittedPower{0.0f};   ///< total light flux (W per channel) every pass distributes
+  double seconds = 0.0;
+  nlohmann::json toJson() const;
+};
+
+/// The two photon maps: caustic photons arrived by light paths L S+ D (one or more specular
+/// bounces straight from a light), global photons are every other diffuse hit (direct light
+/// included). Each pass carries the lights' full flux: the global map alone is an unbiased
+/// estimate of everything but caustics, the caustic map of caustics alone.
+struct PhotonMaps {
+  std::vector<Photon> global;
+  std::vector<Photon> caustic;
+  PhotonStats stats;
+};
+
+/// Trace both passes in parallel (TBB). Photon i's random stream depends only on (seed, pass,
+/// i) and photons are stored in index order, so the maps are identical at any thread count.
+/// Throws CancelledError when `progress` cancels.
+PhotonMaps tracePhotons(const Scene& scene, const Hbvh& accel, const PhotonSettings& settings,
+                        Progress* progress = nullptr);
+
+}  // namespace voxcone

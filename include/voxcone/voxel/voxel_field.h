@@ -1,0 +1,125 @@
+#pragma once
+/// \file voxel_field.h
+/// The sparse voxel radiance field: scene surfaces voxelized into OpenVDB grids at a finest
+/// level and its coarser mip levels (the octree), carrying opacity, normal, diffuse albedo and
+/// outgoing diffuse radiance from injected photons. OpenVDB types stay inside src/voxel/.
+///
+/// Levels: level L has 2^L voxels across the longest axis of the scene bounds (level 10 =
+/// 1024 voxels across). Mip m of a field built at level L is level L - m.
+
+#include "voxcone/core/bounds.h"
+#include "voxcone/core/progress.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace voxcone {
+
+class Scene;
+struct PhotonMaps;
+
+/// Voxelization and injection settings.
+struct VoxelSettings {
+  int level = 8;             ///< finest level, [1, 13]
+  int coarsestLevel = 2;     ///< coarsest mip level built, [0, level]
+  /// Standard deviation of the Gaussian photon footprint, in voxels of the finest level. The
+  /// footprint's weights over the voxels holding surface sum to one (power is conserved).
+  float kernelSigmaVoxels = 0.75f;
+  /// Level of the caustic grid (finer than `level` for sharp caustics); 0: no caustic grid.
+  int causticLevel = 0;
+};
+
+/// Memory and time of one grid at one level.
+struct VoxelGridStats {
+  std::string grid;          ///< "opacity", "normal", "albedo", "radiance", "caustic", "topology"
+  int level = 0;
+  double voxelSize = 0.0;    ///< world units
+  uint64_t activeVoxels = 0;
+  uint64_t leaves = 0;
+  uint64_t bytes = 0;        ///< in memory
+  double seconds = 0.0;      ///< time to build it
+};
+
+/// One voxel looked up at a (possibly fractional) level.
+struct VoxelSample {
+  float opacity = 0.0f;      ///< coverage in [0, 1]
+  Vec3 radiance{0.0f};       ///< outgoing diffuse radiance (opacity-weighted mean), W/(sr m^2)
+  Vec3 normal{0.0f};         ///< mean normal (not normalized: its length says how aligned)
+};
+
+/// The voxel field. Build, then inject photons, then build the mips.
+class VoxelField {
+public:
+  VoxelField();
+  ~VoxelField();
+  VoxelField(VoxelField&&) noexcept;
+  VoxelField& operator=(VoxelField&&) noexcept;
+
+  /// Voxelize the scene's surfaces at settings.level: only voxels a triangle passes through
+  /// are active (triangle-box overlap, Akenine-Möller 2001); per voxel the surface area inside
+  /// it, the area-weighted normal and diffuse albedo. Specular-only surfaces get opacity but
+  /// no albedo (they gather no light). Throws SettingsError for bad settings.
+  static VoxelField voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress = nullptr);
+
+  /// Splat photon power into the finest level with a normalized Gaussian footprint and turn it
+  /// into outgoing radiance L = albedo / pi * E, E = power / surface area in the voxel. Caustic
+  /// photons go to the caustic grid when settings.causticLevel > 0. Identical at any thread count.
+  /// The footprint covers the active voxels within 3 sigma whose mean normal faces the photon's
+  /// normal (dot > 0: light on one side of a two-sided wall stays on that side) and that hold
+  /// diffuse albedo; weights exp(-d^2 / 2 sigma^2) times the voxel's surface area, normalized
+  /// to one. Without such a voxel the photon goes to the voxel containing it, else it is
+  /// dropped (droppedPower()). Replaces earlier injections; rebuilds mips already built.
+  void inject(const PhotonMaps& photons, Progress* progress = nullptr);
+
+  /// Build levels level-1 ... coarsestLevel by 2x2x2 box restriction: opacity = mean coverage
+  /// of the 8 children, radiance and albedo = opacity-weighted means, normal = opacity-weighted
+  /// sum (renormalized when queried).
+  void buildMips(Progress* progress = nullptr);
+
+  const VoxelSettings& settings() const;
+  /// The scene bounds the grid covers (a cube anchored at the scene's lower corner).
+  const Bounds3& bounds() const;
+  /// Voxel size of `level`, world units.
+  double voxelSize(int level) const;
+  /// Levels built so far, finest first.
+  std::vector<int> levels() const;
+
+  /// The voxel containing worldPos at `level` (nearest, no filtering); zero outside.
+  VoxelSample lookup(const Vec3& worldPos, int level) const;
+  /// Trilinear at an integer level, linear between levels for fractional `level` (what cones use).
+  VoxelSample sample(const Vec3& worldPos, float level) const;
+  /// Caustic radiance at worldPos (trilinear in the caustic grid); zero without one.
+  Vec3 causticRadiance(const Vec3& worldPos) const;
+
+  /// Totals used by tests: sum over the finest level of radiance * pi / albedo * area (the
+  /// injected flux), per channel.
+  Vec3 injectedPower() const;
+  /// Photon power (W per channel) of the last inject() that found no active voxel: photons
+  /// outside every voxel's surface are dropped and counted here.
+  Vec3 droppedPower() const;
+  /// Total surface area (world units squared) the finest level holds: the sum over voxels of
+  /// the area inside each voxel.
+  double surfaceArea() const;
+  /// Active voxels at `level` (0 when the level is not built).
+  uint64_t activeVoxels(int level) const;
+
+  /// One row per grid and level.
+  std::vector<VoxelGridStats> stats() const;
+  /// Bytes in memory of everything the field holds.
+  uint64_t memoryBytes() const;
+
+  /// Write every grid and level into one .vdb file (standard OpenVDB grid types: FloatGrid
+  /// "opacity_L<level>", Vec3SGrid "normal_L<level>", "radiance_L<level>", "albedo_L<level>",
+  /// "caustic_L<level>"), file metadata from `metadata` (top-level keys as strings named
+  /// "voxcone:<key>") plus level, voxel size and photon counts. Atomic. Throws Error.
+  void write(const std::string& path, const nlohmann::json& metadata) const;
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+}  // namespace voxcone

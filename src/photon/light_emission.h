@@ -1,0 +1,64 @@
+#pragma once
+/// \file light_emission.h
+/// Sampling photon emission (a point and a direction leaving a light) for the photon tracer.
+/// Scene samples lights towards a shading point only; emission is computed here from Scene's
+/// public fields, with the same light set and the same choice by power as Scene::finalize
+/// (every emissive triangle and every point light is one light, chosen in proportion to the
+/// luminance of its flux).
+
+#include "voxcone/core/math.h"
+#include "voxcone/core/ray.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace voxcone {
+
+class Scene;
+
+/// A photon leaving a light.
+struct EmittedPhoton {
+  Ray ray;               ///< origin offset off the emitter's surface, unit direction
+  /// Flux estimate of this one sample, W per channel: the chosen light's RGB flux divided by
+  /// the probability of choosing it. Its expectation over the choice is the total flux.
+  DVec3 fluxWatts{0.0};
+};
+
+/// The lights of a scene with their flux and the power distribution used to choose them.
+class LightEmission {
+public:
+  /// Collects the emissive triangles (positive area and flux) and the point lights with
+  /// positive luminance of intensity.
+  explicit LightEmission(const Scene& scene);
+
+  /// True when no light emits anything (no photon can be emitted).
+  bool empty() const { return m_cdf.empty(); }
+  /// Number of lights that can be chosen.
+  size_t lightCount() const { return m_cdf.size(); }
+  /// Sum of every light's flux, W per channel (Lambertian emitter: pi * Le * area per
+  /// emitting side; point light: 4 pi I).
+  const DVec3& totalFlux() const { return m_totalFlux; }
+  /// Probability of choosing light `i` (emissive triangles first, then point lights).
+  double pmf(size_t i) const { return m_pmf[i]; }
+
+  /// Sample an emitted photon. uLight in [0,1) chooses the light (double, so that lights of
+  /// probability below float resolution keep their share), uSide in [0,1) the side of a
+  /// two-sided emitter, uPos in [0,1)^2 the point on a triangle, uDir in [0,1)^2 the direction.
+  /// Returns false when nothing is emitted (no lights).
+  bool sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const;
+
+private:
+  struct Light {
+    uint32_t triangle = 0;   ///< emissive triangle, or
+    int32_t pointLight = -1; ///< index in Scene::pointLights (>= 0 for a point light)
+    DVec3 fluxWatts{0.0};
+    bool twoSided = false;
+  };
+  const Scene& m_scene;
+  std::vector<Light> m_lights;
+  std::vector<double> m_cdf;   ///< cumulative choice probability, the last entry exactly 1
+  std::vector<double> m_pmf;
+  DVec3 m_totalFlux{0.0};
+};
+
+}  // namespace voxcone

@@ -1,0 +1,180 @@
+// Photon tracing (Jensen 2001, "Realistic Image Synthesis Using Photon Mapping", ch. 5; the
+// flow of pbrt-v3's SPPM photon pass): emit from the lights by power, follow the HBVH, store
+// at diffuse hits, continue by importance-sampling the BSDF with Russian roulette.
+
+#include "voxcone/photon/photon_tracer.h"
+
+#include "light_emission.h"
+#include "voxcone/accel/hbvh.h"
+#include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
+#include "voxcone/scene/bsdf.h"
+#include "voxcone/scene/scene.h"
+
+#include <nlohmann/json.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <chrono>
+
+namespace voxcone {
+
+nlohmann::json PhotonStats::toJson() const {
+  const double emitted = double(emittedGlobal + emittedCaustic);
+  return {{"emitted_global", emittedGlobal},
+          {"emitted_caustic", emittedCaustic},
+          {"stored_global", storedGlobal},
+          {"stored_caustic", storedCaustic},
+          {"emitted_power", {emittedPower.x, emittedPower.y, emittedPower.z}},
+          {"seconds", seconds},
+          {"photons_per_second", seconds > 0.0 ? emitted / seconds : 0.0}};
+}
+
+namespace {
+
+/// Photons per work item: the unit of parallel work, of progress and of the cancel check.
+/// The maps do not depend on it (every photon has its own random stream).
+constexpr uint64_t kBlockSize = 4096;
+
+enum class Pass : uint64_t { Global = 0, Caustic = 1 };
+
+/// Trace photon `index` of `pass` and append what it stores to `out`. `powerScale` is one over
+/// the photons emitted in the pass, so that each pass carries the lights' full flux.
+void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lights, const PhotonSettings& settings,
+                 Pass pass, uint64_t index, double powerScale, std::vector<Photon>& out) {
+  // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
+  Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
+
+  // Emission. The light choice takes 32 random bits as a double (the CDF is double).
+  EmittedPhoton e;
+  const double uLight = double(rng.nextU32()) * 0x1p-32;
+  const float uSide = rng.uniform();
+  const Vec2 uPos = rng.uniform2();
+  const Vec2 uDir = rng.uniform2();
+  if (!lights.sample(uLight, uSide, uPos, uDir, e)) return;
+  Vec3 power = Vec3(e.fluxWatts * powerScale);
+  if (!isFinite(power) || !(maxComponent(power) > 0.0f)) return;
+  Ray ray = e.ray;
+
+  // True while every bounce so far was a delta (specular) one; with at least one bounce, a
+  // diffuse hit then ends a path L S+ D (a caustic).
+  bool specularOnly = true;
+  for (int segment = 1; segment <= settings.maxDepth; ++segment) {
+    const std::optional<Hit> hit = accel.intersect(ray);
+    if (!hit) return;  // escaped the scene
+    const Vec3 pos = ray.at(hit->t);
+    const SurfaceHit sh = scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    const Vec3 woWorld = -glm::normalize(ray.dir);
+    if (!isFinite(pos) || !isFinite(sh.shadingNormal) || !isFinite(woWorld)) return;
+    const Material& mat = scene.materials[sh.material];
+
+    // Store at diffuse hits only (Lambertian, Oren-Nayar): the voxel field gathers diffuse
+    // radiance, and glossy lobes are not view-independent, so a glossy hit stores nothing.
+    if (mat.isDiffuse()) {
+      const bool caustic = specularOnly && segment > 1;
+      if (pass == Pass::Global ? !caustic : caustic) {
+        Photon ph;
+        ph.position = pos;
+        ph.power = power;
+        ph.incident = woWorld;
+        ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
+        out.push_back(ph);
+      }
+      // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.
+      if (pass == Pass::Caustic) return;
+    } else if (pass == Pass::Caustic && !mat.isDelta()) {
+      // A rough (glossy) bounce can never lead to L S+ D: stop early.
+      return;
+    }
+    if (segment == settings.maxDepth) return;
+
+    // Continue by sampling the BSDF for importance (no 1/eta^2 on refraction: Veach 1997,
+    // sec. 5.2). No adjoint shading-normal correction (Veach eq. 5.19): smooth normals only
+    // tilt the cosine, as in pbrt-v3's SPPM.
+    const Frame frame(sh.shadingNormal);
+    const Vec3 wo = frame.toLocal(woWorld);
+    BsdfSample bs;
+    const float uc = rng.uniform();
+    const Vec2 u = rng.uniform2();
+    if (!bsdfSample(mat, wo, uc, u, bs, TransportMode::Importance) || isBlack(bs.weight)) return;
+    Vec3 newPower = power * bs.weight;
+    if (!bs.delta) {
+      specularOnly = false;
+      // Russian roulette at every non-delta bounce (Jensen 2001, sec. 5.3): survive with
+      // q = min(1, max(new) / max(old)) and divide by q. For a Lambertian bounce of a grey
+      // photon q is the albedo (Jensen's choice); in general the largest channel of a
+      // surviving photon keeps its value, so photons keep comparable power, and a zero channel
+      // never divides. Delta bounces skip roulette: their weight is at most one and maxDepth
+      // bounds them.
+      const float q = std::min(1.0f, maxComponent(newPower) / maxComponent(power));
+      if (!(q > 0.0f)) return;
+      if (q < 1.0f) {
+        if (rng.uniform() >= q) return;
+        newPower /= q;
+      }
+    }
+    if (!isFinite(newPower) || !(maxComponent(newPower) > 0.0f)) return;
+    power = newPower;
+    ray = spawnRay(pos, sh.geomNormal, glm::normalize(frame.toWorld(bs.wi)));
+  }
+}
+
+}  // namespace
+
+PhotonMaps tracePhotons(const Scene& scene, const Hbvh& accel, const PhotonSettings& settings, Progress* progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Progress nullProgress;
+  Progress& prog = progress ? *progress : nullProgress;
+  PhotonMaps maps;
+  const LightEmission lights(scene);
+
+  // Nothing is emitted without a light: both maps stay empty.
+  const uint64_t counts[2] = {lights.empty() ? 0 : settings.photons, lights.empty() ? 0 : settings.causticPhotons};
+  const uint64_t blocks[2] = {(counts[0] + kBlockSize - 1) / kBlockSize, (counts[1] + kBlockSize - 1) / kBlockSize};
+  prog.start("photons", counts[0] + counts[1]);
+
+  // One parallel loop over the blocks of both passes; block b collects into perBlock[b], and
+  // the blocks are concatenated in order, so the maps do not depend on the thread count.
+  std::vector<std::vector<Photon>> perBlock(blocks[0] + blocks[1]);
+  std::atomic<bool> cancelled{false};
+  tbb::parallel_for(tbb::blocked_range<uint64_t>(0, perBlock.size(), 1), [&](const tbb::blocked_range<uint64_t>& r) {
+    for (uint64_t b = r.begin(); b != r.end(); ++b) {
+      if (cancelled.load(std::memory_order_relaxed) || prog.cancelled()) {
+        cancelled = true;
+        return;
+      }
+      const Pass pass = b < blocks[0] ? Pass::Global : Pass::Caustic;
+      const uint64_t p = static_cast<uint64_t>(pass);
+      const uint64_t first = (b - (pass == Pass::Global ? 0 : blocks[0])) * kBlockSize;
+      const uint64_t last = std::min(counts[p], first + kBlockSize);
+      const double powerScale = 1.0 / double(counts[p]);
+      std::vector<Photon>& out = perBlock[b];
+      for (uint64_t i = first; i < last; ++i) tracePhoton(scene, accel, lights, settings, pass, i, powerScale, out);
+      prog.advance(last - first);
+    }
+  });
+  if (cancelled) throw CancelledError();
+
+  // Concatenate in block order.
+  size_t sizes[2] = {0, 0};
+  for (uint64_t b = 0; b < perBlock.size(); ++b) sizes[b < blocks[0] ? 0 : 1] += perBlock[b].size();
+  maps.global.reserve(sizes[0]);
+  maps.caustic.reserve(sizes[1]);
+  for (uint64_t b = 0; b < perBlock.size(); ++b) {
+    std::vector<Photon>& dst = b < blocks[0] ? maps.global : maps.caustic;
+    dst.insert(dst.end(), perBlock[b].begin(), perBlock[b].end());
+    std::vector<Photon>().swap(perBlock[b]);
+  }
+  prog.finish();
+
+  maps.stats.emittedGlobal = counts[0];
+  maps.stats.emittedCaustic = counts[1];
+  maps.stats.storedGlobal = maps.global.size();
+  maps.stats.storedCaustic = maps.caustic.size();
+  maps.stats.emittedPower = Vec3(lights.totalFlux());
+  maps.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return maps;
+}
+
+}  // namespace voxcone

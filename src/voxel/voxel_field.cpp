@@ -1,0 +1,660 @@
+/// \file voxel_field.cpp
+/// The sparse voxel field: per level, one OpenVDB topology tree whose active values index a
+/// brick table, and per-voxel attributes stored compactly as structure-of-arrays. This is the
+/// only translation unit of the library that includes OpenVDB (its headers are slow to compile).
+///
+/// Layout of one level (why not OpenVDB value grids or a uint32 index per voxel in 4^3 leaves):
+/// a flat wall leaves most of a dense leaf empty, so a dense index leaf costs ~19 bytes per active
+/// voxel on the Cornell walls, more than all the attributes together. Instead voxels are grouped
+/// in 4^3 bricks: the OpenVDB tree (Tree4<uint32_t, 5, 4, 2>, i.e. 4^3 leaves of bricks = 16^3
+/// voxels) maps a brick coordinate to a brick index; the brick holds a 64-bit occupancy mask and
+/// the index of its first voxel, and voxel (i, j, k) is
+///   brickBase[b] + popcount(brickMask[b] & ((1 << bit) - 1)),  bit = (i&3)<<4 | (j&3)<<2 | (k&3)
+/// (the NanoVDB "index grid" idea). That is ~2 bytes of topology per voxel on a wall.
+///
+/// Attributes per voxel (compact encodings, decoded by the accessors below):
+///   coverage  half    finest level: surface area in the voxel / voxelSize^2 (may exceed 1);
+///                     coarser levels: opacity (mean child opacity). Opacity = min(1, coverage).
+///   normal    uint16  octahedral unit vector, 2 x 8 bit (Cigolle et al. 2014, "A Survey of
+///                     Efficient Representations for Independent Unit Vectors"; < 1 degree
+///                     error), stored renormalized (the opacity-weighted sum's length is not kept)
+///   albedo    3 x uint8 linear [0, 1]
+///   radiance  uint32  RGB9E5 shared exponent (EXT_texture_shared_exponent): 9-bit mantissas,
+///                     relative error <= 2^-10 on the largest channel, range [0, 65408] W/(sr m^2)
+/// 11 bytes per voxel plus ~2-3 bytes of topology: cornell-dragon level 10 (5.9 M voxels, 7.5 M
+/// with the mips) fits in 100 MB. 2x16-bit normals and 3 x half radiance (15 bytes) did not
+/// (135 MB measured).
+
+#include "voxcone/voxel/voxel_field.h"
+
+#include "voxelize.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/core/timer.h"
+#include "voxcone/image/image_io.h"
+#include "voxcone/photon/photon_tracer.h"
+#include "voxcone/scene/scene.h"
+
+#include <Imath/half.h>
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+#include <openvdb/io/File.h>
+#include <openvdb/tree/Tree.h>
+#include <openvdb/tree/ValueAccessor.h>
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+namespace voxcone {
+
+namespace {
+
+using voxel::VoxelArrays;
+using Half = Imath::half;
+/// Brick coordinate -> brick index. Only active values are meaningful.
+using IndexTree = openvdb::tree::Tree4<uint32_t, 5, 4, 2>::Type;
+/// A read-only accessor that does not register with the tree (cheap to make per query).
+using IndexAccessor = openvdb::tree::ValueAccessor<const IndexTree, false>;
+
+// ---- compact encodings ----
+
+/// Octahedral encoding of a unit vector in 2 x 8 bits.
+uint16_t encodeNormal(const Vec3& n) {
+  const float l1 = std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
+  if (!(l1 > 0.0f)) return encodeNormal(Vec3(0.0f, 0.0f, 1.0f));
+  float x = n.x / l1, y = n.y / l1;
+  if (n.z < 0.0f) {
+    const float ox = (1.0f - std::abs(y)) * (x >= 0.0f ? 1.0f : -1.0f);
+    const float oy = (1.0f - std::abs(x)) * (y >= 0.0f ? 1.0f : -1.0f);
+    x = ox;
+    y = oy;
+  }
+  auto q = [](float v) { return uint16_t(std::lround((std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f) * 254.0f)); };
+  return uint16_t(q(x) | (q(y) << 8));
+}
+Vec3 decodeNormal(uint16_t code) {
+  const float x = float(code & 0xffu) / 254.0f * 2.0f - 1.0f;
+  const float y = float(code >> 8) / 254.0f * 2.0f - 1.0f;
+  Vec3 n(x, y, 1.0f - std::abs(x) - std::abs(y));
+  const float t = std::max(-n.z, 0.0f);
+  n.x += n.x >= 0.0f ? -t : t;
+  n.y += n.y >= 0.0f ? -t : t;
+  return glm::normalize(n);
+}
+uint8_t encodeUnorm8(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); }
+/// RGB9E5 (OpenGL EXT_texture_shared_exponent): three 9-bit mantissas, one 5-bit exponent.
+/// Values saturate at 65408 instead of overflowing; negatives clamp to 0.
+uint32_t encodeRgb9e5(const Vec3& rgb) {
+  constexpr float kMax = 65408.0f;  // (2^9 - 1) / 2^9 * 2^(31 - 15)
+  const float r = std::clamp(rgb.x, 0.0f, kMax), g = std::clamp(rgb.y, 0.0f, kMax), b = std::clamp(rgb.z, 0.0f, kMax);
+  const float maxc = std::max(r, std::max(g, b));
+  if (!(maxc > 0.0f)) return 0;
+  int e2 = 0;
+  std::frexp(maxc, &e2);                             // maxc = f * 2^e2, f in [0.5, 1)
+  int exp = std::max(-16, e2 - 1) + 1 + 15;          // shared biased exponent
+  if (std::floor(maxc / std::ldexp(1.0f, exp - 15 - 9) + 0.5f) >= 512.0f) ++exp;
+  const float scale = std::ldexp(1.0f, exp - 15 - 9);
+  auto m = [&](float v) { return std::min(511u, uint32_t(std::floor(v / scale + 0.5f))); };
+  return m(r) | (m(g) << 9) | (m(b) << 18) | (uint32_t(exp) << 27);
+}
+Vec3 decodeRgb9e5(uint32_t code) {
+  const float scale = std::ldexp(1.0f, int(code >> 27) - 15 - 9);
+  return Vec3(float(code & 511u), float((code >> 9) & 511u), float((code >> 18) & 511u)) * scale;
+}
+float decodeUnorm8(uint8_t v) { return float(v) * (1.0f / 255.0f); }
+
+/// One level of a field: topology plus compact attributes.
+struct Level {
+  int level = 0;
+  double voxelSize = 0.0;
+  uint32_t resolution = 0;
+  std::unique_ptr<IndexTree> tree;      ///< brick coordinate -> brick index
+  std::vector<uint64_t> brickMask;      ///< occupied voxels of the brick
+  std::vector<uint32_t> brickBase;      ///< index of the brick's first voxel
+  std::vector<Half> coverage;
+  std::vector<uint16_t> normal;
+  std::vector<uint8_t> albedo;          ///< 3 per voxel
+  std::vector<uint32_t> radiance;       ///< RGB9E5; empty before injection
+  double buildSeconds = 0.0;
+
+  size_t size() const { return coverage.size(); }
+
+  /// Index of voxel (i, j, k) in the attribute arrays, or -1 when inactive or outside.
+  int64_t find(int64_t i, int64_t j, int64_t k, IndexAccessor& acc) const {
+    if (i < 0 || j < 0 || k < 0 || i >= resolution || j >= resolution || k >= resolution) return -1;
+    uint32_t b = 0;
+    if (!acc.probeValue(openvdb::Coord(int32_t(i >> 2), int32_t(j >> 2), int32_t(k >> 2)), b)) return -1;
+    const uint32_t bit = voxel::brickBit(uint32_t(i), uint32_t(j), uint32_t(k));
+    const uint64_t mask = brickMask[b];
+    if (!((mask >> bit) & 1u)) return -1;
+    return int64_t(brickBase[b]) + __builtin_popcountll(mask & ((uint64_t(1) << bit) - 1));
+  }
+
+  float opacity(size_t v) const { return std::min(1.0f, float(coverage[v])); }
+  Vec3 albedoAt(size_t v) const {
+    return Vec3(decodeUnorm8(albedo[3 * v]), decodeUnorm8(albedo[3 * v + 1]), decodeUnorm8(albedo[3 * v + 2]));
+  }
+  Vec3 radianceAt(size_t v) const {
+    return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
+  }
+  Vec3 normalAt(size_t v) const { return decodeNormal(normal[v]); }
+
+  /// Visit every voxel: f(index, i, j, k), bricks in tree order (callers sort when they need
+  /// an order). The brick coordinates come from the tree, so no per-brick key is stored.
+  template <typename F> void forEachVoxel(F&& f) const {
+    for (auto it = tree->cbeginValueOn(); it; ++it) {
+      const openvdb::Coord c = it.getCoord();
+      const uint32_t b = *it, bi = uint32_t(c.x()), bj = uint32_t(c.y()), bk = uint32_t(c.z());
+      uint64_t mask = brickMask[b];
+      size_t v = brickBase[b];
+      while (mask) {
+        const uint32_t bit = uint32_t(__builtin_ctzll(mask));
+        mask &= mask - 1;
+        f(v++, (bi << 2) | (bit >> 4), (bj << 2) | ((bit >> 2) & 3u), (bk << 2) | (bit & 3u));
+      }
+    }
+  }
+
+  void setRadiance(const std::vector<Vec3>& values) {
+    radiance.resize(values.size());
+    for (size_t v = 0; v < values.size(); ++v) radiance[v] = encodeRgb9e5(values[v]);
+  }
+
+  uint64_t topologyBytes() const {
+    return (tree ? tree->memUsage() : 0) + brickMask.capacity() * sizeof(uint64_t) + brickBase.capacity() * sizeof(uint32_t);
+  }
+};
+
+/// Build a level's topology and compact attributes from sorted full-precision arrays.
+Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
+  Level out;
+  out.level = level;
+  out.voxelSize = voxelSize;
+  out.resolution = uint32_t(1) << level;
+  out.tree = std::make_unique<IndexTree>(uint32_t(0));
+  openvdb::tree::ValueAccessor<IndexTree> acc(*out.tree);
+  uint64_t lastBrick = ~uint64_t(0);
+  for (size_t v = 0; v < a.size(); ++v) {
+    const uint64_t brick = a.keys[v] >> 6;
+    if (brick != lastBrick) {
+      uint32_t bi, bj, bk;
+      voxel::unpackBrick(brick, bi, bj, bk);
+      acc.setValue(openvdb::Coord(int32_t(bi), int32_t(bj), int32_t(bk)), uint32_t(out.brickMask.size()));
+      lastBrick = brick;
+      out.brickMask.push_back(0);
+      out.brickBase.push_back(uint32_t(v));
+    }
+    out.brickMask.back() |= uint64_t(1) << (a.keys[v] & 63u);
+  }
+  out.brickMask.shrink_to_fit();
+  out.brickBase.shrink_to_fit();
+  out.coverage.resize(a.size());
+  out.normal.resize(a.size());
+  out.albedo.resize(3 * a.size());
+  for (size_t v = 0; v < a.size(); ++v) {
+    out.coverage[v] = Half(a.coverage[v]);
+    out.normal[v] = encodeNormal(a.normal[v]);
+    for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
+  }
+  if (!a.radiance.empty()) out.setRadiance(a.radiance);
+  return out;
+}
+
+/// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1): opacity = sum of
+/// child opacities / 8; radiance and albedo = opacity-weighted means; normal = opacity-weighted
+/// sum, renormalized. Preserves sum(opacity * radiance) * voxel volume exactly (before storage).
+VoxelArrays restrictLevel(const Level& child) {
+  std::vector<std::pair<uint64_t, uint32_t>> parents;
+  parents.reserve(child.size());
+  child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
+    parents.emplace_back(voxel::packKey(i >> 1, j >> 1, k >> 1), uint32_t(v));
+  });
+  // (parent key, child index) is unique: one order at any thread count.
+  tbb::parallel_sort(parents.begin(), parents.end());
+  VoxelArrays out;
+  const bool lit = !child.radiance.empty();
+  for (size_t a = 0; a < parents.size();) {
+    size_t b = a;
+    double opSum = 0.0;
+    DVec3 rad(0.0), alb(0.0), nrm(0.0);
+    for (; b < parents.size() && parents[b].first == parents[a].first; ++b) {
+      const size_t c = parents[b].second;
+      const double op = child.opacity(c);
+      opSum += op;
+      alb += op * DVec3(child.albedoAt(c));
+      nrm += op * DVec3(child.normalAt(c));
+      if (lit) rad += op * DVec3(child.radianceAt(c));
+    }
+    const double len = glm::length(nrm);
+    out.keys.push_back(parents[a].first);
+    out.coverage.push_back(float(opSum / 8.0));
+    out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : child.normalAt(parents[a].second));
+    out.albedo.push_back(opSum > 0.0 ? Vec3(alb / opSum) : Vec3(0.0f));
+    if (lit) out.radiance.push_back(opSum > 0.0 ? Vec3(rad / opSum) : Vec3(0.0f));
+    a = b;
+  }
+  return out;
+}
+
+/// A field's levels, finest first.
+struct Grid {
+  std::vector<Level> levels;
+  double injectSeconds = 0.0;
+  bool empty() const { return levels.empty(); }
+  const Level* find(int level) const {
+    if (levels.empty()) return nullptr;
+    const int m = levels.front().level - level;
+    return m >= 0 && m < int(levels.size()) ? &levels[size_t(m)] : nullptr;
+  }
+};
+
+/// What a trilinear or nearest query accumulates.
+struct Accum {
+  double weight = 0.0;  ///< sum of filter weight * opacity
+  double opacity = 0.0; ///< sum of filter weight * opacity (same, kept apart for clarity)
+  DVec3 radiance{0.0};  ///< sum of filter weight * opacity * radiance
+  DVec3 normal{0.0};    ///< sum of filter weight * opacity * normal
+  VoxelSample finish() const {
+    VoxelSample s;
+    s.opacity = float(opacity);
+    if (weight > 0.0) {
+      s.radiance = Vec3(radiance / weight);
+      s.normal = Vec3(normal / weight);
+    }
+    return s;
+  }
+};
+
+/// Trilinear over the 8 voxel centres around worldPos (inactive voxels count as empty).
+void trilinear(const Level& lv, const DVec3& origin, const Vec3& worldPos, double scale, Accum& acc) {
+  const DVec3 q = (DVec3(worldPos) - origin) / lv.voxelSize - DVec3(0.5);
+  const DVec3 base = glm::floor(q);
+  const DVec3 f = q - base;
+  IndexAccessor access(*lv.tree);
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const double w = (dx ? f.x : 1.0 - f.x) * (dy ? f.y : 1.0 - f.y) * (dz ? f.z : 1.0 - f.z) * scale;
+    if (w <= 0.0) continue;
+    const int64_t v = lv.find(int64_t(base.x) + dx, int64_t(base.y) + dy, int64_t(base.z) + dz, access);
+    if (v < 0) continue;
+    const double wo = w * lv.opacity(size_t(v));
+    acc.weight += wo;
+    acc.opacity += wo;
+    acc.radiance += wo * DVec3(lv.radianceAt(size_t(v)));
+    acc.normal += wo * DVec3(lv.normalAt(size_t(v)));
+  }
+}
+
+std::once_flag g_openvdbInit;
+
+}  // namespace
+
+struct VoxelField::Impl {
+  VoxelSettings settings;
+  Bounds3 bounds;
+  DVec3 origin{0.0};
+  double extent = 0.0;        ///< side of the cube the grid covers, world units
+  Grid main, caustic;
+  double surfaceArea = 0.0;   ///< world units^2, full precision sum at voxelization
+  DVec3 injected{0.0}, dropped{0.0};
+  uint64_t globalPhotons = 0, causticPhotons = 0;
+
+  double voxelSize(int level) const { return extent / double(uint64_t(1) << level); }
+  void inject(Grid& grid, const std::vector<Photon>& photons, Progress* progress, DVec3& injectedOut);
+};
+
+namespace {
+
+/// Splat `photons` into `lv` (see VoxelField::inject); returns flux per voxel.
+std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const std::vector<Photon>& photons,
+                               float sigmaVoxels, DVec3& dropped, Progress* progress) {
+  std::vector<Vec3> flux(lv.size(), Vec3(0.0f));
+  const double radius = 3.0 * double(sigmaVoxels);
+  const double inv2s2 = 1.0 / (2.0 * double(sigmaVoxels) * sigmaVoxels);
+  // Photons go in fixed blocks; a wave of blocks is splatted in parallel into per-block lists,
+  // then added in block order, so the float sums are the same at any thread count.
+  constexpr size_t kBlock = 2048, kWave = 64;
+  const size_t blocks = (photons.size() + kBlock - 1) / kBlock;
+  struct Splat {
+    uint32_t voxel;
+    Vec3 flux;
+  };
+  std::vector<std::vector<Splat>> lists(std::min(blocks, kWave));
+  std::vector<DVec3> blockDropped(lists.size());
+  for (size_t wave = 0; wave < blocks; wave += kWave) {
+    if (progress && progress->cancelled()) throw CancelledError();
+    const size_t waveBlocks = std::min(kWave, blocks - wave);
+    tbb::parallel_for(size_t(0), waveBlocks, [&](size_t wb) {
+      std::vector<Splat>& out = lists[wb];
+      out.clear();
+      blockDropped[wb] = DVec3(0.0);
+      IndexAccessor access(*lv.tree);
+      std::vector<std::pair<uint32_t, float>> cand;
+      const size_t begin = (wave + wb) * kBlock, end = std::min(photons.size(), begin + kBlock);
+      for (size_t p = begin; p < end; ++p) {
+        const Photon& ph = photons[p];
+        const DVec3 q = (DVec3(ph.position) - origin) / lv.voxelSize;
+        cand.clear();
+        double wsum = 0.0;
+        int64_t lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = int64_t(std::ceil(q[a] - 0.5 - radius));
+          hi[a] = int64_t(std::floor(q[a] - 0.5 + radius));
+        }
+        for (int64_t i = lo[0]; i <= hi[0]; ++i)
+          for (int64_t j = lo[1]; j <= hi[1]; ++j)
+            for (int64_t k = lo[2]; k <= hi[2]; ++k) {
+              const double d2 = sqr(double(i) + 0.5 - q.x) + sqr(double(j) + 0.5 - q.y) + sqr(double(k) + 0.5 - q.z);
+              if (d2 > radius * radius) continue;
+              const int64_t v = lv.find(i, j, k, access);
+              if (v < 0) continue;
+              // Two-sided leak guard: only voxels whose mean normal faces the photon's side.
+              if (glm::dot(lv.normalAt(size_t(v)), ph.normal) <= 0.0f) continue;
+              // Only voxels holding diffuse surface gather light.
+              const uint8_t* alb = &lv.albedo[3 * size_t(v)];
+              if ((alb[0] | alb[1] | alb[2]) == 0) continue;
+              // Gaussian footprint times the surface area the voxel holds: a uniform photon
+              // density then gives a uniform irradiance flux / area, where the plain Gaussian
+              // would give a voxel clipped to a sliver of surface the flux of a full voxel (and
+              // radiance up to 1 / sliver area).
+              const double w = std::exp(-d2 * inv2s2) * double(lv.coverage[size_t(v)]);
+              cand.emplace_back(uint32_t(v), float(w));
+              wsum += w;
+            }
+        if (wsum > 0.0) {
+          // Normalized over the qualifying voxels: the photon's power is conserved.
+          for (const auto& [v, w] : cand) out.push_back({v, ph.power * float(double(w) / wsum)});
+          continue;
+        }
+        const int64_t v = lv.find(int64_t(std::floor(q.x)), int64_t(std::floor(q.y)), int64_t(std::floor(q.z)), access);
+        if (v >= 0) out.push_back({uint32_t(v), ph.power});
+        else blockDropped[wb] += DVec3(ph.power);
+      }
+    });
+    for (size_t wb = 0; wb < waveBlocks; ++wb) {
+      for (const Splat& s : lists[wb]) flux[s.voxel] += s.flux;
+      dropped += blockDropped[wb];
+    }
+    if (progress) progress->advance(std::min(photons.size(), (wave + waveBlocks) * kBlock) - wave * kBlock);
+  }
+  return flux;
+}
+
+}  // namespace
+
+void VoxelField::Impl::inject(Grid& grid, const std::vector<Photon>& photons, Progress* progress, DVec3& injectedOut) {
+  if (grid.empty()) return;
+  Timer timer;
+  Level& lv = grid.levels.front();
+  const std::vector<Vec3> flux = splatPhotons(lv, origin, photons, settings.kernelSigmaVoxels, dropped, progress);
+  // L = albedo / pi * E, E = flux / area (area = coverage * voxelSize^2 at the finest level).
+  std::vector<Vec3> radiance(lv.size());
+  const double voxelArea = lv.voxelSize * lv.voxelSize;
+  injectedOut = DVec3(0.0);
+  for (size_t v = 0; v < lv.size(); ++v) {
+    injectedOut += DVec3(flux[v]);
+    const double area = double(lv.coverage[v]) * voxelArea;
+    radiance[v] = area > 0.0 ? Vec3(DVec3(lv.albedoAt(v)) * (1.0 / (3.14159265358979323846 * area)) * DVec3(flux[v])) : Vec3(0.0f);
+  }
+  lv.setRadiance(radiance);
+  // Mips built before are stale: rebuild them from the new finest level.
+  const size_t mips = grid.levels.size();
+  grid.levels.resize(1);
+  grid.injectSeconds = timer.seconds();
+  for (size_t m = 1; m < mips; ++m) {
+    Timer t;
+    const Level& child = grid.levels.back();
+    VoxelArrays a = restrictLevel(child);
+    grid.levels.push_back(makeLevel(child.level - 1, child.voxelSize * 2.0, a));
+    grid.levels.back().buildSeconds = t.seconds();
+  }
+}
+
+VoxelField::VoxelField() : m_impl(std::make_unique<Impl>()) {}
+VoxelField::~VoxelField() = default;
+VoxelField::VoxelField(VoxelField&&) noexcept = default;
+VoxelField& VoxelField::operator=(VoxelField&&) noexcept = default;
+
+VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress) {
+  if (settings.level < 1 || settings.level > 13)
+    throw SettingsError("voxel level must be in [1, 13], got " + std::to_string(settings.level));
+  if (settings.coarsestLevel < 0 || settings.coarsestLevel > settings.level)
+    throw SettingsError("coarsest voxel level must be in [0, level], got " + std::to_string(settings.coarsestLevel));
+  if (!(settings.kernelSigmaVoxels > 0.0f) || settings.kernelSigmaVoxels > 16.0f)
+    throw SettingsError("kernel sigma must be in (0, 16] voxels, got " + std::to_string(settings.kernelSigmaVoxels));
+  if (settings.causticLevel != 0 && (settings.causticLevel < settings.coarsestLevel || settings.causticLevel > 13))
+    throw SettingsError("caustic level must be 0 or in [coarsest level, 13], got " +
+                        std::to_string(settings.causticLevel));
+  if (scene.triangleCount() == 0 || scene.bounds().empty()) throw SettingsError("cannot voxelize a scene without triangles");
+
+  VoxelField field;
+  Impl& f = *field.m_impl;
+  f.settings = settings;
+  const Bounds3& sb = scene.bounds();
+  f.origin = DVec3(sb.lo);
+  const DVec3 diag = DVec3(sb.hi) - DVec3(sb.lo);
+  // Pad by a relative 1e-6 so the max corner falls inside the last voxel, not on its far face.
+  f.extent = std::max(diag.x, std::max(diag.y, diag.z)) * (1.0 + 1e-6);
+  if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
+  f.bounds = Bounds3(sb.lo, Vec3(f.origin + DVec3(f.extent)));
+
+  auto build = [&](Grid& grid, int level, bool countArea) {
+    Timer timer;
+    const double vs = f.voxelSize(level);
+    VoxelArrays a = voxel::voxelizeTriangles(scene, f.origin, vs, uint32_t(1) << level, progress);
+    if (countArea) {
+      double area = 0.0;
+      for (float c : a.coverage) area += double(c);
+      f.surfaceArea = area * vs * vs;
+    }
+    grid.levels.push_back(makeLevel(level, vs, a));
+    grid.levels.back().buildSeconds = timer.seconds();
+  };
+  build(f.main, settings.level, true);
+  if (settings.causticLevel > 0) build(f.caustic, settings.causticLevel, false);
+  return field;
+}
+
+void VoxelField::inject(const PhotonMaps& photons, Progress* progress) {
+  Impl& f = *m_impl;
+  if (progress) progress->start("inject", photons.global.size() + photons.caustic.size());
+  f.dropped = DVec3(0.0);
+  f.globalPhotons = photons.global.size();
+  f.causticPhotons = f.caustic.empty() ? 0 : photons.caustic.size();
+  f.inject(f.main, photons.global, progress, f.injected);
+  DVec3 causticInjected(0.0);
+  f.inject(f.caustic, photons.caustic, progress, causticInjected);
+  if (progress) progress->finish();
+}
+
+void VoxelField::buildMips(Progress* progress) {
+  Impl& f = *m_impl;
+  for (Grid* grid : {&f.main, &f.caustic}) {
+    if (grid->empty()) continue;
+    grid->levels.resize(1);
+    if (progress) progress->start("mips", uint64_t(grid->levels.front().level - f.settings.coarsestLevel));
+    while (grid->levels.back().level > f.settings.coarsestLevel) {
+      if (progress && progress->cancelled()) throw CancelledError();
+      Timer t;
+      const Level& child = grid->levels.back();
+      VoxelArrays a = restrictLevel(child);
+      const int level = child.level - 1;
+      const double vs = child.voxelSize * 2.0;
+      grid->levels.push_back(makeLevel(level, vs, a));
+      grid->levels.back().buildSeconds = t.seconds();
+      if (progress) progress->advance(1);
+    }
+    if (progress) progress->finish();
+  }
+}
+
+const VoxelSettings& VoxelField::settings() const { return m_impl->settings; }
+const Bounds3& VoxelField::bounds() const { return m_impl->bounds; }
+double VoxelField::voxelSize(int level) const { return m_impl->voxelSize(level); }
+
+std::vector<int> VoxelField::levels() const {
+  std::vector<int> out;
+  for (const Level& lv : m_impl->main.levels) out.push_back(lv.level);
+  return out;
+}
+
+VoxelSample VoxelField::lookup(const Vec3& worldPos, int level) const {
+  const Level* lv = m_impl->main.find(level);
+  if (!lv) return {};
+  const DVec3 q = glm::floor((DVec3(worldPos) - m_impl->origin) / lv->voxelSize);
+  IndexAccessor access(*lv->tree);
+  const int64_t v = lv->find(int64_t(q.x), int64_t(q.y), int64_t(q.z), access);
+  if (v < 0) return {};
+  VoxelSample s;
+  s.opacity = lv->opacity(size_t(v));
+  s.radiance = lv->radianceAt(size_t(v));
+  s.normal = lv->normalAt(size_t(v));
+  return s;
+}
+
+VoxelSample VoxelField::sample(const Vec3& worldPos, float level) const {
+  const Grid& g = m_impl->main;
+  if (g.empty()) return {};
+  const float finest = float(g.levels.front().level), coarsest = float(g.levels.back().level);
+  const float l = std::clamp(level, coarsest, finest);
+  const int l0 = int(std::floor(l));
+  const float t = l - float(l0);
+  Accum acc;
+  trilinear(*g.find(l0), m_impl->origin, worldPos, 1.0 - double(t), acc);
+  if (t > 0.0f) trilinear(*g.find(l0 + 1), m_impl->origin, worldPos, double(t), acc);
+  return acc.finish();
+}
+
+Vec3 VoxelField::causticRadiance(const Vec3& worldPos) const {
+  const Grid& g = m_impl->caustic;
+  if (g.empty()) return Vec3(0.0f);
+  Accum acc;
+  trilinear(g.levels.front(), m_impl->origin, worldPos, 1.0, acc);
+  // The opacity-weighted mean: the surface's caustic radiance, not faded by the trilinear
+  // weights of empty voxels around a surface point.
+  return acc.finish().radiance;
+}
+
+Vec3 VoxelField::injectedPower() const { return Vec3(m_impl->injected); }
+Vec3 VoxelField::droppedPower() const { return Vec3(m_impl->dropped); }
+double VoxelField::surfaceArea() const { return m_impl->surfaceArea; }
+
+uint64_t VoxelField::activeVoxels(int level) const {
+  const Level* lv = m_impl->main.find(level);
+  return lv ? lv->size() : 0;
+}
+
+std::vector<VoxelGridStats> VoxelField::stats() const {
+  std::vector<VoxelGridStats> rows;
+  for (const Level& lv : m_impl->main.levels) {
+    auto row = [&](const char* name, uint64_t bytes, double seconds) {
+      VoxelGridStats s;
+      s.grid = name;
+      s.level = lv.level;
+      s.voxelSize = lv.voxelSize;
+      s.activeVoxels = lv.size();
+      s.leaves = lv.tree ? lv.tree->leafCount() : 0;
+      s.bytes = bytes;
+      s.seconds = seconds;
+      rows.push_back(s);
+    };
+    const bool finest = &lv == &m_impl->main.levels.front();
+    row("topology", lv.topologyBytes(), lv.buildSeconds);
+    row("opacity", lv.coverage.capacity() * sizeof(Half), 0.0);
+    row("normal", lv.normal.capacity() * sizeof(uint16_t), 0.0);
+    row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
+    row("radiance", lv.radiance.capacity() * sizeof(uint32_t), finest ? m_impl->main.injectSeconds : 0.0);
+  }
+  for (const Level& lv : m_impl->caustic.levels) {
+    VoxelGridStats s;
+    s.grid = "caustic";
+    s.level = lv.level;
+    s.voxelSize = lv.voxelSize;
+    s.activeVoxels = lv.size();
+    s.leaves = lv.tree ? lv.tree->leafCount() : 0;
+    s.bytes = lv.topologyBytes() + lv.coverage.capacity() * sizeof(Half) + lv.normal.capacity() * sizeof(uint16_t) +
+              lv.albedo.capacity() + lv.radiance.capacity() * sizeof(uint32_t);
+    s.seconds = lv.buildSeconds;
+    rows.push_back(s);
+  }
+  return rows;
+}
+
+uint64_t VoxelField::memoryBytes() const {
+  uint64_t total = 0;
+  for (const VoxelGridStats& s : stats()) total += s.bytes;
+  return total;
+}
+
+void VoxelField::write(const std::string& path, const nlohmann::json& metadata) const {
+  std::call_once(g_openvdbInit, [] { openvdb::initialize(); });
+  const Impl& f = *m_impl;
+  openvdb::GridPtrVec grids;
+  auto transformFor = [&](const Level& lv) {
+    // OpenVDB puts voxel centres at integer index coordinates: voxel (i, j, k) of ours has its
+    // centre at origin + (i + 0.5) * voxelSize.
+    auto xform = openvdb::math::Transform::createLinearTransform(lv.voxelSize);
+    xform->postTranslate(openvdb::Vec3d(f.origin.x, f.origin.y, f.origin.z) + openvdb::Vec3d(0.5 * lv.voxelSize));
+    return xform;
+  };
+  auto floatGrid = [&](const Level& lv, const std::string& name, auto&& value) {
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setName(name);
+    grid->setTransform(transformFor(lv));
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    auto acc = grid->getAccessor();
+    lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
+      acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), value(v));
+    });
+    grids.push_back(grid);
+  };
+  auto vecGrid = [&](const Level& lv, const std::string& name, auto&& value) {
+    auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    grid->setName(name);
+    grid->setTransform(transformFor(lv));
+    auto acc = grid->getAccessor();
+    lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
+      const Vec3 x = value(v);
+      acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), openvdb::Vec3s(x.x, x.y, x.z));
+    });
+    grids.push_back(grid);
+  };
+  for (const Level& lv : f.main.levels) {
+    const std::string l = std::to_string(lv.level);
+    floatGrid(lv, "opacity_L" + l, [&](size_t v) { return lv.opacity(v); });
+    vecGrid(lv, "normal_L" + l, [&](size_t v) { return lv.normalAt(v); });
+    vecGrid(lv, "albedo_L" + l, [&](size_t v) { return lv.albedoAt(v); });
+    vecGrid(lv, "radiance_L" + l, [&](size_t v) { return lv.radianceAt(v); });
+  }
+  for (const Level& lv : f.caustic.levels)
+    vecGrid(lv, "caustic_L" + std::to_string(lv.level), [&](size_t v) { return lv.radianceAt(v); });
+
+  openvdb::MetaMap meta;
+  // The caller's keys go under "voxcone:" so they never clash with the typed keys below.
+  if (metadata.is_object())
+    for (auto it = metadata.begin(); it != metadata.end(); ++it)
+      meta.insertMeta("voxcone:" + it.key(),
+                      openvdb::StringMetadata(it->is_string() ? it->get<std::string>() : it->dump()));
+  meta.insertMeta("level", openvdb::Int32Metadata(f.settings.level));
+  meta.insertMeta("coarsest_level", openvdb::Int32Metadata(f.settings.coarsestLevel));
+  meta.insertMeta("caustic_level", openvdb::Int32Metadata(f.settings.causticLevel));
+  meta.insertMeta("voxel_size", openvdb::DoubleMetadata(f.voxelSize(f.settings.level)));
+  meta.insertMeta("global_photons", openvdb::Int64Metadata(int64_t(f.globalPhotons)));
+  meta.insertMeta("caustic_photons", openvdb::Int64Metadata(int64_t(f.causticPhotons)));
+
+  writeFileAtomic(path, [&](const std::string& tmpPath) {
+    try {
+      openvdb::io::File file(tmpPath);
+      file.write(grids, meta);
+      file.close();
+    } catch (const openvdb::Exception& e) {
+      throw Error(path + ": cannot write OpenVDB file: " + e.what());
+    }
+  });
+}
+
+}  // namespace voxcone

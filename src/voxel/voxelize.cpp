@@ -1,0 +1,240 @@
+/// \file voxelize.cpp
+/// Surface voxelization: triangle/box overlap (Akenine-Möller 2001), the area of each
+/// triangle inside each voxel (Sutherland-Hodgman clipping), merged deterministically by
+/// sorting (voxel key, triangle) records.
+
+#include "voxelize.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/scene/scene.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+namespace voxcone::voxel {
+
+namespace {
+
+/// One triangle's area inside one voxel. (key, triangle) is unique, so sorting by it gives
+/// one order, and one floating-point sum per voxel, whatever the thread count.
+struct Contribution {
+  uint64_t key;
+  float areaVoxels;  ///< area / voxelSize^2
+  uint32_t triangle;
+};
+static_assert(sizeof(Contribution) == 16, "keep the transient records at 16 bytes");
+
+/// A triangle, or a slab of a large triangle's voxel range (so that a wall spanning a million
+/// voxels is shared among threads).
+struct WorkItem {
+  uint32_t triangle;
+  int32_t lo[3], hi[3];  ///< inclusive voxel range
+};
+
+/// Triangles whose voxel range exceeds this many voxels are cut into slabs of about this size.
+constexpr int64_t kSlabVoxels = 1 << 14;
+
+/// Sutherland-Hodgman: keep the part of polygon `in` (n vertices) with sign * (p[axis] - bound) >= 0.
+int clipAgainst(const DVec3* in, int n, DVec3* out, int axis, double bound, double sign) {
+  int m = 0;
+  for (int a = 0; a < n; ++a) {
+    const DVec3& p = in[a];
+    const DVec3& q = in[a + 1 == n ? 0 : a + 1];
+    const double dp = sign * (p[axis] - bound);
+    const double dq = sign * (q[axis] - bound);
+    if (dp >= 0.0) out[m++] = p;
+    if ((dp >= 0.0) != (dq >= 0.0)) out[m++] = p + (dp / (dp - dq)) * (q - p);
+  }
+  return m;
+}
+
+}  // namespace
+
+bool triangleBoxOverlap(const DVec3& center, double h, const DVec3 tri[3]) {
+  const DVec3 v0 = tri[0] - center, v1 = tri[1] - center, v2 = tri[2] - center;
+  const DVec3 e[3] = {v1 - v0, v2 - v1, v0 - v2};
+  // The 9 axes cross(edge, box axis).
+  for (int a = 0; a < 3; ++a) {
+    const DVec3& ed = e[a];
+    const DVec3 axes[3] = {DVec3(0.0, ed.z, -ed.y), DVec3(-ed.z, 0.0, ed.x), DVec3(ed.y, -ed.x, 0.0)};
+    for (const DVec3& ax : axes) {
+      const double p0 = glm::dot(ax, v0), p1 = glm::dot(ax, v1), p2 = glm::dot(ax, v2);
+      const double mn = std::min(p0, std::min(p1, p2)), mx = std::max(p0, std::max(p1, p2));
+      const double rad = h * (std::abs(ax.x) + std::abs(ax.y) + std::abs(ax.z));
+      if (mn > rad || mx < -rad) return false;
+    }
+  }
+  // The 3 box face normals: the triangle's bounds against the box.
+  for (int a = 0; a < 3; ++a) {
+    const double mn = std::min(v0[a], std::min(v1[a], v2[a])), mx = std::max(v0[a], std::max(v1[a], v2[a]));
+    if (mn > h || mx < -h) return false;
+  }
+  // The triangle's plane against the box: |n . v0| <= projected box radius.
+  const DVec3 n = glm::cross(e[0], e[1]);
+  const double r = h * (std::abs(n.x) + std::abs(n.y) + std::abs(n.z));
+  return std::abs(glm::dot(n, v0)) <= r;
+}
+
+double clippedTriangleArea(const DVec3 tri[3], const DVec3& lo) {
+  // 3 vertices plus at most one more per clipping plane.
+  DVec3 bufA[12], bufB[12];
+  bufA[0] = tri[0];
+  bufA[1] = tri[1];
+  bufA[2] = tri[2];
+  int n = 3;
+  DVec3* in = bufA;
+  DVec3* out = bufB;
+  for (int axis = 0; axis < 3 && n >= 3; ++axis) {
+    n = clipAgainst(in, n, out, axis, lo[axis], 1.0);
+    std::swap(in, out);
+    if (n < 3) break;
+    n = clipAgainst(in, n, out, axis, lo[axis] + 1.0, -1.0);
+    std::swap(in, out);
+  }
+  if (n < 3) return 0.0;
+  // Polygon area: half the length of the summed fan cross products.
+  DVec3 sum(0.0);
+  for (int a = 1; a + 1 < n; ++a) sum += glm::cross(in[a] - in[0], in[a + 1] - in[0]);
+  return 0.5 * glm::length(sum);
+}
+
+VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,
+                              Progress* progress) {
+  const size_t triCount = scene.triangleCount();
+  const double invVoxel = 1.0 / voxelSize;
+  const int32_t maxIndex = int32_t(resolution) - 1;
+  auto indexPos = [&](uint32_t vertex) { return (DVec3(scene.positions[vertex]) - origin) * invVoxel; };
+
+  // Voxel range of every triangle: floor of its index-space bounds, so that a surface lying
+  // exactly on a voxel face belongs to the voxel above it only (no double-counted area).
+  std::vector<WorkItem> items;
+  items.reserve(triCount + 64);
+  for (size_t t = 0; t < triCount; ++t) {
+    const UVec3& tv = scene.triangles[t];
+    const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
+    WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}};
+    int64_t count = 1;
+    for (int a = 0; a < 3; ++a) {
+      const double mn = std::min(p0[a], std::min(p1[a], p2[a])), mx = std::max(p0[a], std::max(p1[a], p2[a]));
+      item.lo[a] = std::clamp(int32_t(std::floor(mn)), 0, maxIndex);
+      item.hi[a] = std::clamp(int32_t(std::floor(mx)), 0, maxIndex);
+      count *= int64_t(item.hi[a] - item.lo[a] + 1);
+    }
+    if (count <= kSlabVoxels) {
+      items.push_back(item);
+      continue;
+    }
+    // Cut along the longest range axis into slabs of about kSlabVoxels voxels.
+    int axis = 0;
+    for (int a = 1; a < 3; ++a)
+      if (item.hi[a] - item.lo[a] > item.hi[axis] - item.lo[axis]) axis = a;
+    const int64_t rows = item.hi[axis] - item.lo[axis] + 1;
+    const int64_t perRow = count / rows;
+    const int32_t rowsPerSlab = int32_t(std::max<int64_t>(1, kSlabVoxels / perRow));
+    for (int32_t r = item.lo[axis]; r <= item.hi[axis]; r += rowsPerSlab) {
+      WorkItem slab = item;
+      slab.lo[axis] = r;
+      slab.hi[axis] = std::min(item.hi[axis], r + rowsPerSlab - 1);
+      items.push_back(slab);
+    }
+  }
+
+  if (progress) progress->start("voxelize", items.size());
+  // Every (voxel, triangle) overlap with its clipped area, per thread.
+  tbb::enumerable_thread_specific<std::vector<Contribution>> local;
+  std::atomic<bool> cancelled{false};
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, items.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
+    if (cancelled.load(std::memory_order_relaxed)) return;
+    if (progress && progress->cancelled()) {
+      cancelled = true;
+      return;
+    }
+    std::vector<Contribution>& out = local.local();
+    for (size_t w = range.begin(); w != range.end(); ++w) {
+      const WorkItem& item = items[w];
+      const UVec3& tv = scene.triangles[item.triangle];
+      const DVec3 tri[3] = {indexPos(tv.x), indexPos(tv.y), indexPos(tv.z)};
+      for (int32_t i = item.lo[0]; i <= item.hi[0]; ++i)
+        for (int32_t j = item.lo[1]; j <= item.hi[1]; ++j)
+          for (int32_t k = item.lo[2]; k <= item.hi[2]; ++k) {
+            const DVec3 lo(i, j, k);
+            if (!triangleBoxOverlap(lo + DVec3(0.5), 0.5, tri)) continue;
+            const double area = clippedTriangleArea(tri, lo);
+            // Touching (zero-area) overlaps hold no surface: the voxel stays inactive.
+            if (!(area > 0.0)) continue;
+            out.push_back({packKey(uint32_t(i), uint32_t(j), uint32_t(k)), float(area), item.triangle});
+          }
+    }
+    if (progress) progress->advance(range.size());
+  });
+  if (cancelled) throw CancelledError();
+
+  // Concatenate (any order: the sort below fixes it).
+  std::vector<Contribution> all;
+  {
+    size_t total = 0;
+    for (const auto& v : local) total += v.size();
+    all.reserve(total);
+    for (auto& v : local) {
+      all.insert(all.end(), v.begin(), v.end());
+      std::vector<Contribution>().swap(v);
+    }
+  }
+  tbb::parallel_sort(all.begin(), all.end(), [](const Contribution& a, const Contribution& b) {
+    return a.key < b.key || (a.key == b.key && a.triangle < b.triangle);
+  });
+
+  // Geometric normal and diffuse albedo per triangle are looked up, not stored per record.
+  auto triNormal = [&](uint32_t t) {
+    const UVec3& tv = scene.triangles[t];
+    const DVec3 p0(scene.positions[tv.x]), p1(scene.positions[tv.y]), p2(scene.positions[tv.z]);
+    const DVec3 n = glm::cross(p1 - p0, p2 - p0);
+    const double len = glm::length(n);
+    return len > 0.0 ? n / len : DVec3(0.0, 0.0, 1.0);
+  };
+
+  // Reduce each voxel's run in (triangle) order.
+  VoxelArrays out;
+  size_t voxels = 0;
+  for (size_t a = 0; a < all.size(); ++a)
+    if (a == 0 || all[a].key != all[a - 1].key) ++voxels;
+  out.keys.reserve(voxels);
+  out.coverage.reserve(voxels);
+  out.normal.reserve(voxels);
+  out.albedo.reserve(voxels);
+  for (size_t a = 0; a < all.size();) {
+    size_t b = a;
+    double area = 0.0;
+    DVec3 normal(0.0), albedo(0.0);
+    // Surfaces are two-sided: each triangle's normal is flipped into the hemisphere of the
+    // voxel's first (lowest-index) triangle so that the two sides of a thin sheet add up
+    // instead of cancelling; the sign follows that triangle's winding.
+    const DVec3 reference = triNormal(all[a].triangle);
+    for (; b < all.size() && all[b].key == all[a].key; ++b) {
+      const double w = all[b].areaVoxels;
+      const DVec3 n = triNormal(all[b].triangle);
+      area += w;
+      normal += (glm::dot(n, reference) < 0.0 ? -w : w) * n;
+      const Material& m = scene.materials[scene.triMaterial[all[b].triangle]];
+      // Specular-only surfaces add area (opacity) but no albedo: they gather no diffuse light.
+      if (m.isDiffuse()) albedo += w * DVec3(m.albedo);
+    }
+    const double len = glm::length(normal);
+    out.keys.push_back(all[a].key);
+    out.coverage.push_back(float(area));
+    out.normal.push_back(Vec3(len > 0.0 ? normal / len : reference));
+    // Mean over all the voxel's surface (specular parts count as black), so that
+    // radiance = albedo / pi * flux / totalArea equals the diffuse part's radiance times its share.
+    out.albedo.push_back(Vec3(albedo / area));
+    a = b;
+  }
+  if (progress) progress->finish();
+  return out;
+}
+
+}  // namespace voxcone::voxel
