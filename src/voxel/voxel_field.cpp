@@ -6,8 +6,10 @@
 /// Layout of one level (why not OpenVDB value grids or a uint32 index per voxel in 4^3 leaves):
 /// a flat wall leaves most of a dense leaf empty, so a dense index leaf costs ~19 bytes per active
 /// voxel on the Cornell walls, more than all the attributes together. Instead voxels are grouped
-/// in 4^3 bricks: the OpenVDB tree (Tree4<uint32_t, 5, 4, 2>, i.e. 4^3 leaves of bricks = 16^3
-/// voxels) maps a brick coordinate to a brick index; the brick holds a 64-bit occupancy mask and
+/// in 4^3 bricks: the OpenVDB tree (Tree4<uint32_t, 4, 3, 2>, i.e. 4^3 leaves of bricks = 16^3
+/// voxels; internal nodes of 8^3 and 16^3 children, whose tables cost 4 and 32 KB where the
+/// default 16^3/32^3 cost 32 and 256 KB, which dominated the small coarse levels) maps a brick
+/// coordinate to a brick index; the brick holds a 64-bit occupancy mask and
 /// the index of its first voxel, and voxel (i, j, k) is
 ///   brickBase[b] + popcount(brickMask[b] & ((1 << bit) - 1)),  bit = (i&3)<<4 | (j&3)<<2 | (k&3)
 /// (the NanoVDB "index grid" idea). That is ~2 bytes of topology per voxel on a wall.
@@ -21,9 +23,10 @@
 ///   albedo    3 x uint8 linear [0, 1]
 ///   radiance  uint32  RGB9E5 shared exponent (EXT_texture_shared_exponent): 9-bit mantissas,
 ///                     relative error <= 2^-10 on the largest channel, range [0, 65408] W/(sr m^2)
-/// 11 bytes per voxel plus ~2-3 bytes of topology: cornell-dragon level 10 (5.9 M voxels, 7.5 M
-/// with the mips) fits in 100 MB. 2x16-bit normals and 3 x half radiance (15 bytes) did not
-/// (135 MB measured).
+/// 11 bytes per voxel at the finest level (8 without albedo in the mips) plus ~2 bytes of
+/// topology: cornell-dragon level 10 (5.9 M voxels, 7.9 M with the mips) takes 92.8 MiB
+/// (97.3 MB). 2x16-bit normals and 3 x half radiance (15 bytes) took 135 MB; albedo in every
+/// mip and 32^3 root children 101.3 MiB.
 
 #include "voxcone/voxel/voxel_field.h"
 
@@ -56,7 +59,7 @@ namespace {
 using voxel::VoxelArrays;
 using Half = Imath::half;
 /// Brick coordinate -> brick index. Only active values are meaningful.
-using IndexTree = openvdb::tree::Tree4<uint32_t, 5, 4, 2>::Type;
+using IndexTree = openvdb::tree::Tree4<uint32_t, 4, 3, 2>::Type;
 /// A read-only accessor that does not register with the tree (cheap to make per query).
 using IndexAccessor = openvdb::tree::ValueAccessor<const IndexTree, false>;
 
@@ -194,19 +197,22 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
   out.brickBase.shrink_to_fit();
   out.coverage.resize(a.size());
   out.normal.resize(a.size());
-  out.albedo.resize(3 * a.size());
+  // Albedo is kept at the finest level only: injection reads it there, and nothing samples
+  // the albedo of coarser levels (cones gather outgoing radiance).
+  out.albedo.resize(a.albedo.empty() ? 0 : 3 * a.size());
   for (size_t v = 0; v < a.size(); ++v) {
     out.coverage[v] = Half(a.coverage[v]);
     out.normal[v] = encodeNormal(a.normal[v]);
-    for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
+    if (!a.albedo.empty())
+      for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
   }
   if (!a.radiance.empty()) out.setRadiance(a.radiance);
   return out;
 }
 
 /// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1): opacity = sum of
-/// child opacities / 8; radiance and albedo = opacity-weighted means; normal = opacity-weighted
-/// sum, renormalized. Preserves sum(opacity * radiance) * voxel volume exactly (before storage).
+/// child opacities / 8; radiance = opacity-weighted mean; normal = opacity-weighted sum,
+/// renormalized; no albedo (see makeLevel). Preserves sum(opacity * radiance) * voxel volume exactly (before storage).
 VoxelArrays restrictLevel(const Level& child) {
   std::vector<std::pair<uint64_t, uint32_t>> parents;
   parents.reserve(child.size());
@@ -220,12 +226,11 @@ VoxelArrays restrictLevel(const Level& child) {
   for (size_t a = 0; a < parents.size();) {
     size_t b = a;
     double opSum = 0.0;
-    DVec3 rad(0.0), alb(0.0), nrm(0.0);
+    DVec3 rad(0.0), nrm(0.0);
     for (; b < parents.size() && parents[b].first == parents[a].first; ++b) {
       const size_t c = parents[b].second;
       const double op = child.opacity(c);
       opSum += op;
-      alb += op * DVec3(child.albedoAt(c));
       nrm += op * DVec3(child.normalAt(c));
       if (lit) rad += op * DVec3(child.radianceAt(c));
     }
@@ -233,7 +238,6 @@ VoxelArrays restrictLevel(const Level& child) {
     out.keys.push_back(parents[a].first);
     out.coverage.push_back(float(opSum / 8.0));
     out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : child.normalAt(parents[a].second));
-    out.albedo.push_back(opSum > 0.0 ? Vec3(alb / opSum) : Vec3(0.0f));
     if (lit) out.radiance.push_back(opSum > 0.0 ? Vec3(rad / opSum) : Vec3(0.0f));
     a = b;
   }
@@ -566,7 +570,7 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     row("topology", lv.topologyBytes(), lv.buildSeconds);
     row("opacity", lv.coverage.capacity() * sizeof(Half), 0.0);
     row("normal", lv.normal.capacity() * sizeof(uint16_t), 0.0);
-    row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
+    if (!lv.albedo.empty()) row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
     row("radiance", lv.radiance.capacity() * sizeof(uint32_t), finest ? m_impl->main.injectSeconds : 0.0);
   }
   for (const Level& lv : m_impl->caustic.levels) {
@@ -627,7 +631,7 @@ void VoxelField::write(const std::string& path, const nlohmann::json& metadata) 
     const std::string l = std::to_string(lv.level);
     floatGrid(lv, "opacity_L" + l, [&](size_t v) { return lv.opacity(v); });
     vecGrid(lv, "normal_L" + l, [&](size_t v) { return lv.normalAt(v); });
-    vecGrid(lv, "albedo_L" + l, [&](size_t v) { return lv.albedoAt(v); });
+    if (!lv.albedo.empty()) vecGrid(lv, "albedo_L" + l, [&](size_t v) { return lv.albedoAt(v); });
     vecGrid(lv, "radiance_L" + l, [&](size_t v) { return lv.radianceAt(v); });
   }
   for (const Level& lv : f.caustic.levels)

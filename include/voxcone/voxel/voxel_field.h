@@ -75,8 +75,8 @@ public:
   void inject(const PhotonMaps& photons, Progress* progress = nullptr);
 
   /// Build levels level-1 ... coarsestLevel by 2x2x2 box restriction: opacity = mean coverage
-  /// of the 8 children, radiance and albedo = opacity-weighted means, normal = opacity-weighted
-  /// sum (renormalized when queried).
+  /// of the 8 children, radiance = opacity-weighted mean, normal = opacity-weighted sum
+  /// (renormalized). Albedo stays at the finest level only (nothing gathers it from mips).
   void buildMips(Progress* progress = nullptr);
 
   const VoxelSettings& settings() const;
@@ -112,7 +112,7 @@ public:
   uint64_t memoryBytes() const;
 
   /// Write every grid and level into one .vdb file (standard OpenVDB grid types: FloatGrid
-  /// "opacity_L<level>", Vec3SGrid "normal_L<level>", "radiance_L<level>", "albedo_L<level>",
+  /// "opacity_L<level>", Vec3SGrid "normal_L<level>", "radiance_L<level>", "albedo_L<finest>",
   /// "caustic_L<level>"), file metadata from `metadata` (top-level keys as strings named
   /// "voxcone:<key>") plus level, voxel size and photon counts. Atomic. Throws Error.
   void write(const std::string& path, const nlohmann::json& metadata) const;
