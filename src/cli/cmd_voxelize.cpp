@@ -24,9 +24,9 @@ struct VoxelizeOptions {
   std::string output;
   int level = 8;
   int coarsest = 2;
-  int causticLevel = 0;
-  uint64_t photons = 1000000;
-  uint64_t causticPhotons = 0;
+  int causticLevel = -1;  // -1: level + 1 when the scene has specular surfaces, else none
+  int64_t photons = -1;    // -1: the scene's render.photons
+  int64_t causticPhotons = -1;
   uint64_t seed = 0;
   int threads = 0;
   bool json = false;
@@ -38,7 +38,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   ThreadLimit threads(o.threads);
   ConsoleProgress progress(o.quiet || o.json);
   if (o.coarsest > o.level) throw SettingsError("--coarsest-level must not exceed --level");
-  if (o.causticLevel != 0 && (o.causticLevel < o.level || o.causticLevel > 13))
+  if (o.causticLevel > 0 && (o.causticLevel < o.level || o.causticLevel > 13))
     throw SettingsError("--caustic-level must be 0 or in [level, 13]");
 
   Timer t;
@@ -48,16 +48,25 @@ void runVoxelize(const VoxelizeOptions& o) {
   const Hbvh accel(scene, HbvhBuildSettings{}, &progress);
   const double buildSec = t.seconds();
 
+  // Model no more than the scene needs: a caustic grid only where a specular surface can focus
+  // light (L S+ D paths need a delta material). By default one level finer than the field, at
+  // most level 10 (0.55 mm voxels in the Cornell box): the caustic grid is voxelized over the
+  // whole scene before it is pruned to the lit voxels, so finer levels cost seconds.
+  bool specular = false;
+  for (const Material& m : scene.materials) specular = specular || m.isDelta();
+  const int causticLevel =
+      o.causticLevel >= 0 ? o.causticLevel : (specular ? std::max(o.level, std::min(o.level + 1, 10)) : 0);
+
   PhotonSettings ps;
-  ps.photons = o.photons;
-  ps.causticPhotons = o.causticLevel > 0 ? o.causticPhotons : 0;
+  ps.photons = o.photons >= 0 ? uint64_t(o.photons) : scene.render.photons;
+  ps.causticPhotons = causticLevel > 0 ? (o.causticPhotons >= 0 ? uint64_t(o.causticPhotons) : scene.render.causticPhotons) : 0;
   ps.seed = o.seed;
   const PhotonMaps maps = tracePhotons(scene, accel, ps, &progress);
 
   VoxelSettings vs;
   vs.level = o.level;
   vs.coarsestLevel = o.coarsest;
-  vs.causticLevel = o.causticLevel;
+  vs.causticLevel = causticLevel;
   t.reset();
   VoxelField field = VoxelField::voxelize(scene, vs, &progress);
   const double voxelizeSec = t.seconds();
@@ -72,7 +81,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   j["scene"] = o.scenePath;
   j["level"] = o.level;
   j["coarsest_level"] = o.coarsest;
-  j["caustic_level"] = o.causticLevel;
+  j["caustic_level"] = causticLevel;
   j["voxel_size"] = field.voxelSize(o.level);
   j["photons"] = maps.stats.toJson();
   j["timings"] = {{"load_seconds", loadSec},         {"hbvh_seconds", buildSec},
@@ -118,9 +127,14 @@ void addVoxelizeCommand(CLI::App& app) {
   cmd->add_option("scene", o->scenePath, "Scene file (JSON)")->required();
   cmd->add_option("--level", o->level, "Finest level: 2^L voxels across the longest axis")->check(CLI::Range(1, 13));
   cmd->add_option("--coarsest-level", o->coarsest, "Coarsest mip level built")->check(CLI::Range(0, 13));
-  cmd->add_option("--caustic-level", o->causticLevel, "Level of the caustic grid (0: none)")->check(CLI::Range(0, 13));
-  cmd->add_option("--photons", o->photons, "Photons emitted for the global map");
-  cmd->add_option("--caustic-photons", o->causticPhotons, "Photons emitted for the caustic map");
+  cmd->add_option("--caustic-level", o->causticLevel,
+                  "Level of the caustic grid (0: none; default: when the scene has specular surfaces, level + 1 "
+                  "up to 10, never below level)")
+      ->check(CLI::Range(0, 13));
+  cmd->add_option("--photons", o->photons, "Photons emitted for the global map (default: the scene's render.photons)")
+      ->check(CLI::Range(int64_t(0), int64_t(1) << 36));
+  cmd->add_option("--caustic-photons", o->causticPhotons, "Photons emitted for the caustic map (default: the scene's)")
+      ->check(CLI::Range(int64_t(0), int64_t(1) << 36));
   cmd->add_option("--seed", o->seed, "Random seed");
   cmd->add_option("-o,--output", o->output, "Write all grids and levels to this .vdb file");
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));

@@ -390,6 +390,26 @@ std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const std::
 
 }  // namespace
 
+/// The voxels of `lv` with nonzero radiance, as a level of their own.
+Level keepLit(const Level& lv) {
+  std::vector<std::pair<uint64_t, uint32_t>> lit;
+  lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
+    if (!isBlack(lv.radianceAt(v))) lit.emplace_back(voxel::packKey(i, j, k), uint32_t(v));
+  });
+  std::sort(lit.begin(), lit.end());
+  VoxelArrays a;
+  for (const auto& [key, v] : lit) {
+    a.keys.push_back(key);
+    a.coverage.push_back(float(lv.coverage[v]));
+    a.normal.push_back(lv.normalAt(v));
+    a.albedo.push_back(lv.albedoAt(v));
+    a.radiance.push_back(lv.radianceAt(v));
+  }
+  Level out = makeLevel(lv.level, lv.voxelSize, a);
+  out.buildSeconds = lv.buildSeconds;
+  return out;
+}
+
 void VoxelField::Impl::inject(Grid& grid, const std::vector<Photon>& photons, Progress* progress, DVec3& injectedOut) {
   if (grid.empty()) return;
   Timer timer;
@@ -471,13 +491,20 @@ void VoxelField::inject(const PhotonMaps& photons, Progress* progress) {
   f.causticPhotons = f.caustic.empty() ? 0 : photons.caustic.size();
   f.inject(f.main, photons.global, progress, f.injected);
   DVec3 causticInjected(0.0);
-  f.inject(f.caustic, photons.caustic, progress, causticInjected);
+  if (!f.caustic.empty()) {
+    // The caustic grid is voxelized fully so that any caustic photon finds its surface; after
+    // injection only the voxels a caustic photon reached are kept (model no more than the
+    // scene needs), and it gets no mips: caustics are gathered at the shading point.
+    f.caustic.levels.resize(1);
+    f.inject(f.caustic, photons.caustic, progress, causticInjected);
+    f.caustic.levels.front() = keepLit(f.caustic.levels.front());
+  }
   if (progress) progress->finish();
 }
 
 void VoxelField::buildMips(Progress* progress) {
   Impl& f = *m_impl;
-  for (Grid* grid : {&f.main, &f.caustic}) {
+  for (Grid* grid : {&f.main}) {
     if (grid->empty()) continue;
     grid->levels.resize(1);
     if (progress) progress->start("mips", uint64_t(grid->levels.front().level - f.settings.coarsestLevel));

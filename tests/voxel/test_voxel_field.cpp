@@ -386,8 +386,23 @@ TEST(VoxelField, CausticGrid) {
   EXPECT_NEAR(sum / 100.0, 0.6 / M_PI, 0.03 * 0.6 / M_PI);
   EXPECT_EQ(field.lookup(Vec3(0.5f, 0.5f, 0.0f), 5).radiance.x, 0.0f);
   int causticRows = 0;
-  for (const VoxelGridStats& s : field.stats()) causticRows += s.grid == "caustic";
-  EXPECT_EQ(causticRows, 5);  // levels 7 ... 3
+  uint64_t causticVoxels = 0;
+  for (const VoxelGridStats& s : field.stats())
+    if (s.grid == "caustic") {
+      ++causticRows;
+      causticVoxels = s.activeVoxels;
+    }
+  EXPECT_EQ(causticRows, 1);  // level 7 only: caustics are gathered at the shading point, no mips
+  EXPECT_EQ(causticVoxels, 128u * 128u);  // the plane's voxels, every one reached by photons
+
+  // Only voxels a caustic photon reached are kept: photons on one half of the plane keep half.
+  PhotonMaps half;
+  for (const Photon& p : maps.caustic)
+    if (p.position.x < 0.5f) half.caustic.push_back(p);
+  VoxelField field2 = VoxelField::voxelize(scene, settings);
+  field2.inject(half);
+  for (const VoxelGridStats& s : field2.stats())
+    if (s.grid == "caustic") EXPECT_NEAR(double(s.activeVoxels), 128.0 * 64.0, 128.0 * 3.0);
 }
 
 std::string dragonScenePath() { return test::sourceDir() + "/data/scenes/cornell-dragon.json"; }

@@ -30,6 +30,8 @@ struct RenderSettings {
   int maxDepth = 16;       ///< longest path (number of segments) for path / recursion for whitted
   uint64_t seed = 0;
   std::string method = "path";
+  uint64_t photons = 1000000;       ///< photons emitted for the global map (voxel methods)
+  uint64_t causticPhotons = 200000; ///< photons emitted for the caustic map, when caustics are possible
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };
