@@ -1,6 +1,7 @@
 #include "voxcone/core/error.h"
 #include "voxcone/integrator/integrator.h"
 #include "voxcone/integrator/path.h"
+#include "voxcone/integrator/photon_mapping.h"
 #include "voxcone/integrator/whitted.h"
 
 #include <map>
@@ -15,6 +16,7 @@ std::mutex g_mutex;
 std::map<std::string, IntegratorFactory>& table() {
   static std::map<std::string, IntegratorFactory> t = {
       {"path", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new PathIntegrator(c)); }},
+      {"pm", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new PhotonMappingIntegrator(c)); }},
       {"whitted", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new WhittedIntegrator(c)); }},
   };
   return t;

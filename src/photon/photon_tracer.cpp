@@ -79,6 +79,7 @@ void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lig
         ph.power = power;
         ph.incident = woWorld;
         ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
+        ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));
         out.push_back(ph);
       }
       // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.

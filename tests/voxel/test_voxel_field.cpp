@@ -402,7 +402,9 @@ TEST(VoxelField, CausticGrid) {
   VoxelField field2 = VoxelField::voxelize(scene, settings);
   field2.inject(half);
   for (const VoxelGridStats& s : field2.stats())
-    if (s.grid == "caustic") EXPECT_NEAR(double(s.activeVoxels), 128.0 * 64.0, 128.0 * 3.0);
+    if (s.grid == "caustic") {
+      EXPECT_NEAR(double(s.activeVoxels), 128.0 * 64.0, 128.0 * 3.0);
+    }
 }
 
 std::string dragonScenePath() { return test::sourceDir() + "/data/scenes/cornell-dragon.json"; }
