@@ -10,7 +10,7 @@
 
 namespace voxcone {
 
-/// Reads integer options of one integrator and reports any key it did not read.
+/// Reads the options of one integrator and reports any key it did not read.
 class OptionReader {
 public:
   OptionReader(const nlohmann::json& options, std::string integrator)
@@ -27,6 +27,17 @@ public:
       throw SettingsError(m_integrator + "." + key + ": value " + std::to_string(i) + " out of range [" +
                           std::to_string(lo) + ", " + std::to_string(hi) + "]");
     return static_cast<int>(i);
+  }
+  double number(const std::string& key, double def, double lo, double hi) {
+    if (!m_options.contains(key)) return def;
+    m_used.insert(key);
+    const auto& v = m_options.at(key);
+    if (!v.is_number()) throw SettingsError(m_integrator + "." + key + ": expected a number");
+    const double d = v.get<double>();
+    if (!std::isfinite(d) || d < lo || d > hi)
+      throw SettingsError(m_integrator + "." + key + ": value " + std::to_string(d) + " out of range [" +
+                          std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    return d;
   }
   void finish() const {
     for (auto it = m_options.begin(); it != m_options.end(); ++it)

@@ -26,22 +26,10 @@ std::vector<Vec3> positionsOf(const std::vector<Photon>& photons) {
 
 PhotonMappingIntegrator::PhotonMappingIntegrator(const IntegratorContext& c)
     : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth) {
-  if (!c.options.is_object()) throw SettingsError("pm: options must be a JSON object");
-  // max_radius is the one real-valued option: read here, the integers by OptionReader.
-  nlohmann::json intOptions = c.options;
+  OptionReader r(c.options, "pm");
   const float sceneRadius = std::max(0.0f, m_scene.boundingSphere().radius);
-  m_maxRadius = 0.05f * sceneRadius;
-  if (intOptions.contains("max_radius")) {
-    const auto& v = intOptions.at("max_radius");
-    if (!v.is_number()) throw SettingsError("pm.max_radius: expected a number");
-    const double r = v.get<double>();
-    if (!(r > 0.0) || !std::isfinite(r)) throw SettingsError("pm.max_radius: must be positive and finite");
-    m_maxRadius = static_cast<float>(r);
-    intOptions.erase("max_radius");
-  }
-  if (!(m_maxRadius > 0.0f)) m_maxRadius = 1.0f;  // empty scene: any radius finds nothing
-
-  OptionReader r(intOptions, "pm");
+  const double defaultRadius = sceneRadius > 0.0f ? 0.05 * sceneRadius : 1.0;  // empty scene: any radius finds nothing
+  m_maxRadius = static_cast<float>(r.number("max_radius", defaultRadius, 1e-30, 1e30));
   constexpr int kMaxInt = std::numeric_limits<int>::max();
   m_photonSettings.photons = static_cast<uint64_t>(
       r.integer("photons", static_cast<int>(std::min<uint64_t>(c.settings.photons, kMaxInt)), 0, kMaxInt));
