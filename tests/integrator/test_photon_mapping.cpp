@@ -6,6 +6,7 @@
 #include "voxcone/core/parallel.h"
 #include "voxcone/integrator/integrator.h"
 
+#include "../support/render_helpers.h"
 #include "../support/test_scenes.h"
 
 #include <gtest/gtest.h>
@@ -13,15 +14,7 @@
 namespace voxcone {
 namespace {
 
-RenderResult renderWith(const Scene& scene, const std::string& method, RenderSettings settings,
-                        nlohmann::json options = nlohmann::json::object()) {
-  const Hbvh accel(scene);
-  settings.method = method;
-  IntegratorContext ctx{scene, accel, settings, options};
-  auto integrator = createIntegrator(method, ctx);
-  integrator->prepare(nullptr);
-  return renderImage(scene, *integrator, settings);
-}
+using test::renderWith;
 
 Vec3 imageMean(const Image& img) {
   DVec3 s(0.0);
