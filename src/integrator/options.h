@@ -7,6 +7,7 @@
 
 #include <set>
 #include <string>
+#include <vector>
 
 namespace voxcone {
 
@@ -38,6 +39,18 @@ public:
       throw SettingsError(m_integrator + "." + key + ": value " + std::to_string(d) + " out of range [" +
                           std::to_string(lo) + ", " + std::to_string(hi) + "]");
     return d;
+  }
+  /// One of `choices` (the first is the default).
+  std::string choice(const std::string& key, const std::vector<std::string>& choices) {
+    if (!m_options.contains(key)) return choices.front();
+    m_used.insert(key);
+    const auto& v = m_options.at(key);
+    std::string list;
+    for (const std::string& c : choices) list += (list.empty() ? "" : ", ") + c;
+    if (v.is_string())
+      for (const std::string& c : choices)
+        if (v.get<std::string>() == c) return c;
+    throw SettingsError(m_integrator + "." + key + ": expected one of " + list);
   }
   void finish() const {
     for (auto it = m_options.begin(); it != m_options.end(); ++it)

@@ -2,6 +2,7 @@
 #include "voxcone/integrator/integrator.h"
 #include "voxcone/integrator/path.h"
 #include "voxcone/integrator/photon_mapping.h"
+#include "voxcone/integrator/voxel_cone.h"
 #include "voxcone/integrator/whitted.h"
 
 #include <map>
@@ -17,6 +18,7 @@ std::map<std::string, IntegratorFactory>& table() {
   static std::map<std::string, IntegratorFactory> t = {
       {"path", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new PathIntegrator(c)); }},
       {"pm", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new PhotonMappingIntegrator(c)); }},
+      {"voxcone", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new VoxelConeIntegrator(c)); }},
       {"whitted", [](const IntegratorContext& c) { return std::unique_ptr<Integrator>(new WhittedIntegrator(c)); }},
   };
   return t;

@@ -38,6 +38,7 @@
 #include "voxcone/photon/photon_tracer.h"
 #include "voxcone/scene/scene.h"
 
+#include <array>
 #include <Imath/half.h>
 #include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
@@ -122,6 +123,13 @@ struct Level {
   std::vector<uint16_t> normal;
   std::vector<uint8_t> albedo;          ///< 3 per voxel
   std::vector<uint32_t> radiance;       ///< RGB9E5; empty before injection
+  /// Mips only: opacity-weighted mean of |normal| per axis, 3 unorm8 per voxel (the finest
+  /// level takes |normal| of its one mean normal).
+  std::vector<uint8_t> axisFraction;
+  /// Mips only: radiance seen along each axis, 3 RGB9E5 per voxel: the children's radiance
+  /// weighted by their surface's projected area along that axis (a face seen edge-on adds
+  /// nothing). The finest level's one radiance stands for all three.
+  std::vector<uint32_t> radianceAxes;
   double buildSeconds = 0.0;
 
   size_t size() const { return coverage.size(); }
@@ -145,6 +153,14 @@ struct Level {
     return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
   }
   Vec3 normalAt(size_t v) const { return decodeNormal(normal[v]); }
+  Vec3 radianceAxisAt(size_t v, int axis) const {
+    return radianceAxes.empty() ? radianceAt(v) : decodeRgb9e5(radianceAxes[3 * v + size_t(axis)]);
+  }
+  Vec3 axisFractionAt(size_t v) const {
+    if (axisFraction.empty()) return glm::abs(normalAt(v));
+    return Vec3(decodeUnorm8(axisFraction[3 * v]), decodeUnorm8(axisFraction[3 * v + 1]),
+                decodeUnorm8(axisFraction[3 * v + 2]));
+  }
 
   /// Visit every voxel: f(index, i, j, k), bricks in tree order (callers sort when they need
   /// an order). The brick coordinates come from the tree, so no per-brick key is stored.
@@ -207,6 +223,12 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
       for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
   }
   if (!a.radiance.empty()) out.setRadiance(a.radiance);
+  out.radianceAxes.resize(3 * a.radianceAxes.size());
+  for (size_t v = 0; v < a.radianceAxes.size(); ++v)
+    for (int c = 0; c < 3; ++c) out.radianceAxes[3 * v + c] = encodeRgb9e5(a.radianceAxes[v][c]);
+  out.axisFraction.resize(3 * a.axisFraction.size());
+  for (size_t v = 0; v < a.axisFraction.size(); ++v)
+    for (int c = 0; c < 3; ++c) out.axisFraction[3 * v + c] = encodeUnorm8(a.axisFraction[v][c]);
   return out;
 }
 
@@ -226,19 +248,30 @@ VoxelArrays restrictLevel(const Level& child) {
   for (size_t a = 0; a < parents.size();) {
     size_t b = a;
     double opSum = 0.0;
-    DVec3 rad(0.0), nrm(0.0);
+    DVec3 rad(0.0), nrm(0.0), axes(0.0), radAxis[3] = {DVec3(0.0), DVec3(0.0), DVec3(0.0)};
     for (; b < parents.size() && parents[b].first == parents[a].first; ++b) {
       const size_t c = parents[b].second;
       const double op = child.opacity(c);
       opSum += op;
       nrm += op * DVec3(child.normalAt(c));
-      if (lit) rad += op * DVec3(child.radianceAt(c));
+      const DVec3 f = op * DVec3(child.axisFractionAt(c));
+      axes += f;
+      if (lit) {
+        rad += op * DVec3(child.radianceAt(c));
+        for (int ax = 0; ax < 3; ++ax) radAxis[ax] += f[ax] * DVec3(child.radianceAxisAt(c, ax));
+      }
     }
     const double len = glm::length(nrm);
     out.keys.push_back(parents[a].first);
     out.coverage.push_back(float(opSum / 8.0));
+    out.axisFraction.push_back(opSum > 0.0 ? Vec3(axes / opSum) : Vec3(0.0f));
     out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : child.normalAt(parents[a].second));
-    if (lit) out.radiance.push_back(opSum > 0.0 ? Vec3(rad / opSum) : Vec3(0.0f));
+    if (lit) {
+      out.radiance.push_back(opSum > 0.0 ? Vec3(rad / opSum) : Vec3(0.0f));
+      std::array<Vec3, 3> byAxis;
+      for (int ax = 0; ax < 3; ++ax) byAxis[size_t(ax)] = axes[ax] > 0.0 ? Vec3(radAxis[ax] / axes[ax]) : out.radiance.back();
+      out.radianceAxes.push_back(byAxis);
+    }
     a = b;
   }
   return out;
@@ -262,9 +295,14 @@ struct Accum {
   double opacity = 0.0; ///< sum of filter weight * opacity (same, kept apart for clarity)
   DVec3 radiance{0.0};  ///< sum of filter weight * opacity * radiance
   DVec3 normal{0.0};    ///< sum of filter weight * opacity * normal
+  DVec3 projected{0.0}; ///< sum of filter weight * opacity * |normal| per axis
+  DVec3 radianceAxis[3] = {DVec3(0.0), DVec3(0.0), DVec3(0.0)};  ///< sum of weight * projected[a] * radiance along a
   VoxelSample finish() const {
     VoxelSample s;
     s.opacity = float(opacity);
+    s.projected = Vec3(projected);
+    for (int a = 0; a < 3; ++a)
+      s.radianceAxis[a] = projected[a] > 0.0 ? Vec3(radianceAxis[a] / projected[a]) : Vec3(0.0f);
     if (weight > 0.0) {
       s.radiance = Vec3(radiance / weight);
       s.normal = Vec3(normal / weight);
@@ -290,8 +328,28 @@ void trilinear(const Level& lv, const DVec3& origin, const Vec3& worldPos, doubl
     acc.opacity += wo;
     acc.radiance += wo * DVec3(lv.radianceAt(size_t(v)));
     acc.normal += wo * DVec3(lv.normalAt(size_t(v)));
+    const DVec3 proj = wo * DVec3(lv.axisFractionAt(size_t(v)));
+    acc.projected += proj;
+    for (int a = 0; a < 3; ++a) acc.radianceAxis[a] += proj[a] * DVec3(lv.radianceAxisAt(size_t(v), a));
   }
 }
+
+/// A read-only concatenation of photon lists (the main grid takes the global and the caustic map).
+struct PhotonList {
+  std::vector<const std::vector<Photon>*> parts;
+  size_t size() const {
+    size_t n = 0;
+    for (const auto* p : parts) n += p->size();
+    return n;
+  }
+  const Photon& operator[](size_t i) const {
+    for (const auto* p : parts) {
+      if (i < p->size()) return (*p)[i];
+      i -= p->size();
+    }
+    return parts.back()->back();  // unreachable for i < size()
+  }
+};
 
 std::once_flag g_openvdbInit;
 
@@ -308,13 +366,13 @@ struct VoxelField::Impl {
   uint64_t globalPhotons = 0, causticPhotons = 0;
 
   double voxelSize(int level) const { return extent / double(uint64_t(1) << level); }
-  void inject(Grid& grid, const std::vector<Photon>& photons, Progress* progress, DVec3& injectedOut);
+  void inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut);
 };
 
 namespace {
 
 /// Splat `photons` into `lv` (see VoxelField::inject); returns flux per voxel.
-std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const std::vector<Photon>& photons,
+std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& photons,
                                float sigmaVoxels, DVec3& dropped, Progress* progress) {
   std::vector<Vec3> flux(lv.size(), Vec3(0.0f));
   const double radius = 3.0 * double(sigmaVoxels);
@@ -410,7 +468,7 @@ Level keepLit(const Level& lv) {
   return out;
 }
 
-void VoxelField::Impl::inject(Grid& grid, const std::vector<Photon>& photons, Progress* progress, DVec3& injectedOut) {
+void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut) {
   if (grid.empty()) return;
   Timer timer;
   Level& lv = grid.levels.front();
@@ -489,14 +547,16 @@ void VoxelField::inject(const PhotonMaps& photons, Progress* progress) {
   f.dropped = DVec3(0.0);
   f.globalPhotons = photons.global.size();
   f.causticPhotons = f.caustic.empty() ? 0 : photons.caustic.size();
-  f.inject(f.main, photons.global, progress, f.injected);
+  // The main grid holds all diffuse radiance: global photons (every path but L S+ D) plus
+  // caustic photons (L S+ D): each pass carries the lights' full flux for its own paths.
+  f.inject(f.main, PhotonList{{&photons.global, &photons.caustic}}, progress, f.injected);
   DVec3 causticInjected(0.0);
   if (!f.caustic.empty()) {
     // The caustic grid is voxelized fully so that any caustic photon finds its surface; after
     // injection only the voxels a caustic photon reached are kept (model no more than the
     // scene needs), and it gets no mips: caustics are gathered at the shading point.
     f.caustic.levels.resize(1);
-    f.inject(f.caustic, photons.caustic, progress, causticInjected);
+    f.inject(f.caustic, PhotonList{{&photons.caustic}}, progress, causticInjected);
     f.caustic.levels.front() = keepLit(f.caustic.levels.front());
   }
   if (progress) progress->finish();
@@ -542,6 +602,8 @@ VoxelSample VoxelField::lookup(const Vec3& worldPos, int level) const {
   if (v < 0) return {};
   VoxelSample s;
   s.opacity = lv->opacity(size_t(v));
+  s.projected = s.opacity * lv->axisFractionAt(size_t(v));
+  for (int a = 0; a < 3; ++a) s.radianceAxis[a] = lv->radianceAxisAt(size_t(v), a);
   s.radiance = lv->radianceAt(size_t(v));
   s.normal = lv->normalAt(size_t(v));
   return s;
@@ -597,8 +659,10 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     row("topology", lv.topologyBytes(), lv.buildSeconds);
     row("opacity", lv.coverage.capacity() * sizeof(Half), 0.0);
     row("normal", lv.normal.capacity() * sizeof(uint16_t), 0.0);
+    if (!lv.axisFraction.empty()) row("axes", lv.axisFraction.capacity() * sizeof(uint8_t), 0.0);
     if (!lv.albedo.empty()) row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
     row("radiance", lv.radiance.capacity() * sizeof(uint32_t), finest ? m_impl->main.injectSeconds : 0.0);
+    if (!lv.radianceAxes.empty()) row("radiance_axes", lv.radianceAxes.capacity() * sizeof(uint32_t), 0.0);
   }
   for (const Level& lv : m_impl->caustic.levels) {
     VoxelGridStats s;

@@ -7,6 +7,7 @@
 #include "voxcone/core/progress.h"
 
 #include <cstdint>
+#include <array>
 #include <vector>
 
 namespace voxcone {
@@ -55,6 +56,11 @@ struct VoxelArrays {
   std::vector<Vec3> normal;    ///< unit
   std::vector<Vec3> albedo;    ///< diffuse albedo, area-weighted over all the voxel's surface
   std::vector<Vec3> radiance;  ///< W/(sr m^2); empty until injection
+  /// Coarser levels only: opacity-weighted mean of |normal| per axis (what a ray along an axis
+  /// sees of the surfaces); empty at the finest level, where |normal| stands in.
+  std::vector<Vec3> axisFraction;
+  /// Coarser levels only: radiance seen along x, y and z (see Level::radianceAxes).
+  std::vector<std::array<Vec3, 3>> radianceAxes;
   size_t size() const { return keys.size(); }
 };
 

@@ -29,7 +29,7 @@ struct RenderSettings {
   int spp = 16;            ///< samples per pixel, >= 1
   int maxDepth = 16;       ///< longest path (number of segments) for path / recursion for whitted
   uint64_t seed = 0;
-  std::string method = "path";
+  std::string method = "voxcone";
   uint64_t photons = 1000000;       ///< photons emitted for the global map (voxel methods)
   uint64_t causticPhotons = 200000; ///< photons emitted for the caustic map, when caustics are possible
   /// Throws SettingsError naming the offending value.

@@ -34,7 +34,7 @@ struct VoxelSettings {
 
 /// Memory and time of one grid at one level.
 struct VoxelGridStats {
-  std::string grid;          ///< "opacity", "normal", "albedo", "radiance", "caustic", "topology"
+  std::string grid;          ///< "opacity", "normal", "axes", "radiance_axes" (mips), "albedo", "radiance", "caustic", "topology"
   int level = 0;
   double voxelSize = 0.0;    ///< world units
   uint64_t activeVoxels = 0;
@@ -48,6 +48,15 @@ struct VoxelSample {
   float opacity = 0.0f;      ///< coverage in [0, 1]
   Vec3 radiance{0.0f};       ///< outgoing diffuse radiance (opacity-weighted mean), W/(sr m^2)
   Vec3 normal{0.0f};         ///< mean normal (not normalized: its length says how aligned)
+  /// opacity times the mean |normal| per axis. A ray of unit direction d crossing the field
+  /// meets surfaces at the rate dot(projected, |d|) / finest voxel size per unit length (the
+  /// area density times the projected fraction, summed as if the axes' signs agreed): a plane
+  /// crossed at any angle adds up to one crossing, at every level.
+  Vec3 projected{0.0f};
+  /// Radiance seen along the x, y and z axes: the voxels' radiance weighted by their
+  /// surfaces' projected area along that axis (a face seen edge-on adds nothing). A cone along
+  /// d sees sum_a |d_a| projected_a radianceAxis[a] / sum_a |d_a| projected_a.
+  Vec3 radianceAxis[3] = {Vec3(0.0f), Vec3(0.0f), Vec3(0.0f)};
 };
 
 /// The voxel field. Build, then inject photons, then build the mips.
@@ -66,7 +75,9 @@ public:
 
   /// Splat photon power into the finest level with a normalized Gaussian footprint and turn it
   /// into outgoing radiance L = albedo / pi * E, E = power / surface area in the voxel. Caustic
-  /// photons go to the caustic grid when settings.causticLevel > 0. Identical at any thread count.
+  /// photons go to the main grid too (it holds all diffuse radiance: the global map covers
+  /// every light path but L S+ D, the caustic map those) and to the caustic grid when
+  /// settings.causticLevel > 0. Identical at any thread count.
   /// The footprint covers the active voxels within 3 sigma whose mean normal faces the photon's
   /// normal (dot > 0: light on one side of a two-sided wall stays on that side) and that hold
   /// diffuse albedo; weights exp(-d^2 / 2 sigma^2) times the voxel's surface area, normalized
@@ -76,7 +87,9 @@ public:
 
   /// Build levels level-1 ... coarsestLevel by 2x2x2 box restriction: opacity = mean coverage
   /// of the 8 children, radiance = opacity-weighted mean, normal = opacity-weighted sum
-  /// (renormalized). Albedo stays at the finest level only (nothing gathers it from mips).
+  /// (renormalized), opacity-weighted mean |normal| per axis (for VoxelSample::projected) and
+  /// the radiance seen along each axis (VoxelSample::radianceAxis).
+  /// Albedo stays at the finest level only (nothing gathers it from mips).
   void buildMips(Progress* progress = nullptr);
 
   const VoxelSettings& settings() const;

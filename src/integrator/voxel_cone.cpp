@@ -1,0 +1,273 @@
+// The voxcone method: exact specular chains and direct light, cone-gathered indirect light.
+
+#include "voxcone/integrator/voxel_cone.h"
+
+#include "options.h"
+#include "voxcone/accel/hbvh.h"
+#include "voxcone/core/error.h"
+#include "voxcone/core/timer.h"
+#include "voxcone/integrator/whitted.h"
+#include "voxcone/scene/bsdf.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+namespace voxcone {
+
+namespace {
+/// A trilinear lookup reaches 1 voxel from its centre, and a surface fills voxels whose centres
+/// lie within half a voxel diagonal of it: a lookup of voxel size v at height h above a plane
+/// does not see the plane when v <= h / kClearance.
+constexpr float kClearance = 1.0f + 0.8660254f;
+constexpr float kOpaque = 0.99f;
+}  // namespace
+
+VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
+    : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth), m_cones(6, 0.0f) {
+  OptionReader r(c.options, "voxcone");
+  constexpr int kMaxInt = std::numeric_limits<int>::max();
+  bool anyDelta = false;
+  for (const Material& m : m_scene.materials) anyDelta = anyDelta || m.isDelta();
+
+  m_voxelSettings.level = r.integer("level", 7, 1, 12);
+  m_voxelSettings.coarsestLevel = r.integer("coarsest_level", std::min(1, m_voxelSettings.level), 0,
+                                            m_voxelSettings.level);
+  m_voxelSettings.causticLevel = r.integer("caustic_level", anyDelta ? std::min(12, m_voxelSettings.level + 1) : 0,
+                                           0, 12);
+  if (m_voxelSettings.causticLevel != 0 && m_voxelSettings.causticLevel < m_voxelSettings.coarsestLevel)
+    throw SettingsError("voxcone.caustic_level: must be 0 or at least coarsest_level");
+  m_voxelSettings.kernelSigmaVoxels = float(r.number("kernel_sigma", 0.75, 0.05, 16.0));
+  m_photonSettings.photons = uint64_t(
+      r.integer("photons", int(std::min<uint64_t>(c.settings.photons, kMaxInt)), 0, kMaxInt));
+  m_photonSettings.causticPhotons = uint64_t(r.integer(
+      "caustic_photons", int(std::min<uint64_t>(c.settings.causticPhotons, kMaxInt)), 0, kMaxInt));
+  m_photonSettings.seed = c.settings.seed + uint64_t(r.integer("seed", 0, 0, kMaxInt));
+  m_photonSettings.maxDepth = std::max(1, m_maxDepth);
+  if (!anyDelta || m_voxelSettings.causticLevel == 0) m_photonSettings.causticPhotons = 0;
+
+  const int cones = r.integer("cones", 6, 1, 256);
+  const double angleDeg = r.number("cone_angle", 0.0, 0.0, 89.0);
+  m_cones = ConeSet(cones, float(angleDeg * kPi / 180.0));
+  m_coneStep = float(r.number("cone_step", 1.0, 0.25, 4.0));
+  const float sceneRadius = std::max(0.0f, m_scene.boundingSphere().radius);
+  m_maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
+  m_lightSamples = r.integer("light_samples", 1, 1, 1024);
+  m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
+  const std::vector<std::string> views = {"full", "direct", "indirect", "caustic", "field"};
+  const std::string view = r.choice("view", views);
+  m_view = View(std::find(views.begin(), views.end(), view) - views.begin());
+  r.finish();
+}
+
+nlohmann::json VoxelConeIntegrator::settingsJson() const {
+  return {{"max_depth", m_maxDepth},
+          {"level", m_voxelSettings.level},
+          {"coarsest_level", m_voxelSettings.coarsestLevel},
+          {"caustic_level", m_voxelSettings.causticLevel},
+          {"kernel_sigma", m_voxelSettings.kernelSigmaVoxels},
+          {"photons", m_photonSettings.photons},
+          {"caustic_photons", m_photonSettings.causticPhotons},
+          {"photon_seed", m_photonSettings.seed},
+          {"cones", m_cones.cones().size()},
+          {"cone_angle", m_cones.halfAngle() * 180.0f / kPi},
+          {"cone_step", m_coneStep},
+          {"max_distance", m_maxDistance},
+          {"light_samples", m_lightSamples},
+          {"exact_segment", m_exactSegment},
+          {"view", std::array<const char*, 5>{"full", "direct", "indirect", "caustic", "field"}[size_t(m_view)]}};
+}
+
+nlohmann::json VoxelConeIntegrator::statsJson() const {
+  nlohmann::json j = m_stats;
+  j["field_bytes"] = m_field.memoryBytes();
+  for (int level : m_field.levels()) j["active_voxels"][std::to_string(level)] = m_field.activeVoxels(level);
+  return j;
+}
+
+void VoxelConeIntegrator::setField(VoxelField field) {
+  m_field = std::move(field);
+  const std::vector<int> levels = m_field.levels();
+  if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
+  m_finest = levels.front();
+  m_coarsest = levels.back();
+  m_v0 = float(m_field.voxelSize(m_finest));
+  m_fieldBounds = m_field.bounds();
+  m_prepared = true;
+}
+
+void VoxelConeIntegrator::prepare(Progress* progress) {
+  Timer total;
+  const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_photonSettings, progress);
+  m_stats = maps.stats.toJson();
+  m_stats["photon_trace_seconds"] = maps.stats.seconds;
+  Timer t;
+  VoxelField field = VoxelField::voxelize(m_scene, m_voxelSettings, progress);
+  m_stats["voxelize_seconds"] = t.seconds();
+  t.reset();
+  field.inject(maps, progress);
+  m_stats["inject_seconds"] = t.seconds();
+  t.reset();
+  field.buildMips(progress);
+  m_stats["mips_seconds"] = t.seconds();
+  m_stats["prepare_seconds"] = total.seconds();
+  setField(std::move(field));
+}
+
+ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const {
+  ConeResult res;
+  const float cosPhi = glm::dot(n, d);
+  if (!(cosPhi > 0.0f)) return res;  // below the tangent plane: nothing to gather
+  const float h0 = kClearance * m_v0;
+  const Vec3 origin = p + n * h0;
+  const float vMax = float(m_field.voxelSize(m_coarsest));
+  float A = 0.0f;
+  Vec3 C(0.0f);
+  float tEnd = m_maxDistance;
+  // Exact visibility along the axis for the first segment (leak mitigation).
+  bool hitSurface = false;
+  Vec3 hitRadiance(0.0f);
+  if (m_exactSegment > 0.0f) {
+    Ray ray;
+    ray.origin = p + n * (1e-4f * m_v0);
+    ray.dir = d;
+    const float segment = m_exactSegment * m_v0;
+    ray.tMax = segment;
+    if (const std::optional<Hit> hit = m_accel.intersect(ray)) {
+      hitSurface = true;
+      const Vec3 hp = ray.at(hit->t);
+      const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, hp, hit->b1, hit->b2);
+      const Vec3 side = glm::dot(sh.geomNormal, d) < 0.0f ? sh.geomNormal : -sh.geomNormal;
+      // The finest level around the hit, half a voxel towards the ray's side.
+      hitRadiance = m_field.sample(hp + side * (0.5f * m_v0), float(m_finest)).radiance;
+      // March only the part of the cone before the surface: lookups whose reach (kClearance v)
+      // stays in front of it.
+      tEnd = std::min(tEnd, hit->t);
+    }
+  }
+  const Vec3 absD = glm::abs(d);
+  float t = 0.0f;
+  while (t < tEnd && A < kOpaque) {
+    const float h = h0 + t * cosPhi;
+    const float v = std::clamp(std::min(t * tanHalf, h / kClearance), m_v0, vMax);
+    if (hitSurface && t + kClearance * v > tEnd) break;
+    const Vec3 x = origin + d * t;
+    // Outside the field by more than a lookup's reach: nothing more to gather.
+    const Vec3 reach(2.0f * v);
+    if (!Bounds3(m_fieldBounds.lo - reach, m_fieldBounds.hi + reach).contains(x)) break;
+    const float level = float(m_finest) - std::log2(v / m_v0);
+    const VoxelSample s = m_field.sample(x, level);
+    const float step = m_coneStep * v;
+    ++res.samples;
+    // Surfaces met over this step (VoxelSample::projected): a plane adds up to exactly one
+    // crossing over the samples near it (the trilinear tents sum to one), which makes the
+    // cone opaque. Occlusion accumulates linearly: the share of the cone's cross-section the
+    // step's surfaces cover, up to what is still open.
+    const float crossings = glm::dot(s.projected, absD) * step / m_v0;
+    if (crossings > 0.0f) {
+      const float a = std::min(1.0f - A, crossings);
+      // The radiance of the surfaces facing the cone: each axis's radiance weighted by the
+      // projected area the cone sees along it.
+      const Vec3 w = s.projected * absD;
+      const float wsum = w.x + w.y + w.z;
+      C += a * (w.x * s.radianceAxis[0] + w.y * s.radianceAxis[1] + w.z * s.radianceAxis[2]) / wsum;
+      A += a;
+    }
+    t += step;
+  }
+  if (hitSurface && A < 1.0f) {
+    C += (1.0f - A) * hitRadiance;
+    A = 1.0f;
+  }
+  res.radiance = C;
+  res.occlusion = A;
+  return res;
+}
+
+Vec3 VoxelConeIntegrator::gatherIndirect(const Vec3& p, const Vec3& n, float rotation) const {
+  const Frame frame(n);
+  const float cr = std::cos(rotation), sr = std::sin(rotation);
+  const float tanHalf = std::tan(m_cones.halfAngle());
+  Vec3 sum(0.0f);
+  for (const Cone& cone : m_cones.cones()) {
+    const Vec3 a(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z);
+    sum += cone.weight * traceCone(p, n, frame.toWorld(a), tanHalf).radiance;
+  }
+  return sum;
+}
+
+Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const {
+  const Material& mat = m_scene.materials[sh.material];
+  if (m_view == View::Field) return m_field.sample(sh.position, float(m_finest)).radiance;
+  Vec3 L(0.0f);
+  if (m_view == View::Full || m_view == View::Direct)
+    L += estimateDirectLight(m_scene, m_accel, sh, woWorld, rng, m_lightSamples);
+  if (m_view == View::Direct) return L;
+  // The side of the surface the viewer is on.
+  const bool front = glm::dot(sh.geomNormal, woWorld) >= 0.0f;
+  const Vec3 ng = front ? sh.geomNormal : -sh.geomNormal;
+  const Frame frame(sh.shadingNormal);
+  const Vec3 wo = frame.toLocal(woWorld);
+  if (mat.isDiffuse()) {
+    if (m_view != View::Indirect) L += m_field.causticRadiance(sh.position);
+    if (m_view == View::Caustic) return L;
+    const float rotation = 2.0f * kPi * rng.uniform();
+    if (mat.type == MaterialType::Lambertian) {
+      L += mat.albedo * gatherIndirect(sh.position, ng, rotation);
+    } else {
+      // Other diffuse BRDFs: each cone weighted by f(wo, axis) * pi.
+      const Frame geo(ng);
+      const float cr = std::cos(rotation), sr = std::sin(rotation);
+      const float tanHalf = std::tan(m_cones.halfAngle());
+      for (const Cone& cone : m_cones.cones()) {
+        const Vec3 a(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z);
+        const Vec3 d = geo.toWorld(a);
+        const Vec3 f = bsdfEval(mat, wo, frame.toLocal(d));
+        if (isBlack(f)) continue;
+        L += f * (kPi * cone.weight) * traceCone(sh.position, ng, d, tanHalf).radiance;
+      }
+    }
+    return L;
+  }
+  if (m_view == View::Caustic) return L;
+  // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
+  BsdfSample bs;
+  const float uc = rng.uniform();
+  const Vec2 u = rng.uniform2();
+  if (!bsdfSample(mat, wo, uc, u, bs) || isBlack(bs.weight)) return L;
+  const Vec3 d = frame.toWorld(bs.wi);
+  const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
+  const float tanHalf = std::clamp(mat.roughness, 0.01f, 1.0f);
+  L += bs.weight * traceCone(sh.position, side, d, tanHalf).radiance;
+  return L;
+}
+
+Vec3 VoxelConeIntegrator::trace(const Ray& ray, Rng& rng, int depth, float throughput) const {
+  const std::optional<Hit> hit = m_accel.intersect(ray);
+  if (!hit) return Vec3(0.0f);
+  const Vec3 pos = ray.at(hit->t);
+  const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+  const Vec3 woWorld = -glm::normalize(ray.dir);
+  // Emission seen directly or through delta bounces (shadow rays sample it everywhere else).
+  Vec3 L = m_view == View::Full || m_view == View::Direct ? m_scene.emitted(sh, woWorld) : Vec3(0.0f);
+  const Material& mat = m_scene.materials[sh.material];
+  if (!mat.isDelta()) return L + shade(sh, woWorld, rng);
+  if (depth + 1 >= m_maxDepth) return L;
+  const Frame frame(sh.shadingNormal);
+  DeltaLobe lobes[2];
+  const int n = bsdfDeltaLobes(mat, frame.toLocal(woWorld), lobes);
+  for (int i = 0; i < n; ++i) {
+    const float branch = throughput * maxComponent(lobes[i].weight);
+    if (branch < 1e-3f) continue;  // cannot change the pixel visibly
+    L += lobes[i].weight * trace(spawnRay(pos, sh.geomNormal, frame.toWorld(lobes[i].wi)), rng, depth + 1, branch);
+  }
+  return L;
+}
+
+Vec3 VoxelConeIntegrator::li(const Ray& ray, Rng& rng) const {
+  if (!m_prepared) throw Error("voxcone: li() before prepare()");
+  return trace(ray, rng, 0, 1.0f);
+}
+
+}  // namespace voxcone
