@@ -55,6 +55,7 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   m_maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
   m_lightSamples = r.integer("light_samples", 1, 1, 1024);
   m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
+  m_hitGather = r.choice("gather", {"march", "hit"}) == "hit";
   const std::vector<std::string> views = {"full", "direct", "indirect", "caustic", "field"};
   const std::string view = r.choice("view", views);
   m_view = View(std::find(views.begin(), views.end(), view) - views.begin());
@@ -76,6 +77,7 @@ nlohmann::json VoxelConeIntegrator::settingsJson() const {
           {"max_distance", m_maxDistance},
           {"light_samples", m_lightSamples},
           {"exact_segment", m_exactSegment},
+          {"gather", m_hitGather ? "hit" : "march"},
           {"view", std::array<const char*, 5>{"full", "direct", "indirect", "caustic", "field"}[size_t(m_view)]}};
 }
 
@@ -128,6 +130,25 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
   // Exact visibility along the axis for the first segment (leak mitigation).
   bool hitSurface = false;
   Vec3 hitRadiance(0.0f);
+  if (m_hitGather) {
+    // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
+    Ray ray = spawnRay(p, n, d);
+    ray.tMax = m_maxDistance;
+    const std::optional<Hit> hit = m_accel.intersect(ray);
+    if (!hit) return res;
+    const Vec3 hp = ray.at(hit->t);
+    const float v = std::clamp(hit->t * tanHalf, m_v0, vMax);
+    const Vec3 ng = m_scene.surfaceAt(hit->triangle, hp, hit->b1, hit->b2).geomNormal;
+    const Vec3 side = glm::dot(ng, d) < 0.0f ? ng : -ng;
+    const VoxelSample s = m_field.sample(hp + side * (0.5f * v), float(m_finest) - std::log2(v / m_v0));
+    const Vec3 w = s.projected * glm::abs(d);
+    const float wsum = w.x + w.y + w.z;
+    res.radiance = wsum > 0.0f ? (w.x * s.radianceAxis[0] + w.y * s.radianceAxis[1] + w.z * s.radianceAxis[2]) / wsum
+                               : s.radiance;
+    res.occlusion = 1.0f;
+    res.samples = 1;
+    return res;
+  }
   if (m_exactSegment > 0.0f) {
     Ray ray;
     ray.origin = p + n * (1e-4f * m_v0);

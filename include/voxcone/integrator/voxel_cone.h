@@ -102,6 +102,7 @@ private:
   float m_maxDistance = 0.0f;
   int m_lightSamples = 1;
   float m_exactSegment = 0.0f;  ///< finest voxels
+  bool m_hitGather = false;     ///< gather = "hit": one exact ray per cone, field filtered at the hit
   enum class View { Full, Direct, Indirect, Caustic, Field } m_view = View::Full;
 
   VoxelField m_field;
