@@ -50,7 +50,15 @@
 ///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
 ///    default: the scene's bounding-sphere diameter);
 ///  - `light_samples` (shadow rays per shading point, default 1);
-///  - `exact_segment` (finest voxels, 0 = off, default 0).
+///  - `exact_segment` (finest voxels, 0 = off, default 32);
+///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
+///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
+///    lookup of voxel size t tan(theta), half of it towards the ray's side, seen along the axis).
+///    No over-occlusion at a cone's rim and about 10x faster than marching on cornell-box, but
+///    the lookup at the hit reaches through thin walls (it leaks like unmitigated marching);
+///  - `view`: "full" (default), or one term alone for error studies: "direct" (emission and
+///    shadow rays), "indirect" (cones), "caustic" (caustic grid), "field" (the main grid's
+///    radiance at the first non-delta hit: what cones see there).
 /// Deterministic: the photon pass and the field are identical at any thread count, and li()
 /// draws only from the pixel's stream.
 
