@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Renders one scene with every method and prints time against error, measured against a
 # converged reference image:  tools/accuracy_table.sh SCENE.json REFERENCE.exr OUTDIR [THREADS]
-# Rows: voxcone (defaults, 4 and 16 spp), pm (16 spp), path (16, 64, 256 spp).
+# Rows: voxcone (defaults, 4 and 16 spp; gather = hit with 16 cones), pm (16 spp), path (16, 64, 256 spp).
 # Total time = photon tracing + voxelization + rendering, as `voxcone render` prints it.
 set -euo pipefail
 scene=$1 ref=$2 out=$3 threads=${4:-0}
@@ -22,5 +22,7 @@ PY
 }
 run voxcone4 voxcone 4 '{}'
 run voxcone16 voxcone 16 '{}'
+run voxcone-hit4 voxcone 4 '{"gather":"hit","cones":16,"photons":200000,"light_samples":4}'
+run voxcone-hit16 voxcone 16 '{"gather":"hit","cones":16,"photons":200000}'
 run pm16 pm 16 '{}'
 for spp in 16 64 256; do run path$spp path "$spp" '{}'; done
