@@ -10,7 +10,6 @@
 #include "voxcone/scene/bsdf.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
@@ -22,6 +21,8 @@ namespace {
 /// does not see the plane when v <= h / kClearance.
 constexpr float kClearance = 1.0f + 0.8660254f;
 constexpr float kOpaque = 0.99f;
+/// Names of VoxelConeIntegrator::View, in order.
+const std::vector<std::string> kViewNames = {"full", "direct", "indirect", "caustic", "field"};
 }  // namespace
 
 VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
@@ -56,9 +57,8 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   m_lightSamples = r.integer("light_samples", 1, 1, 1024);
   m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
   m_hitGather = r.choice("gather", {"march", "hit"}) == "hit";
-  const std::vector<std::string> views = {"full", "direct", "indirect", "caustic", "field"};
-  const std::string view = r.choice("view", views);
-  m_view = View(std::find(views.begin(), views.end(), view) - views.begin());
+  const std::string view = r.choice("view", kViewNames);
+  m_view = View(std::find(kViewNames.begin(), kViewNames.end(), view) - kViewNames.begin());
   r.finish();
 }
 
@@ -78,7 +78,7 @@ nlohmann::json VoxelConeIntegrator::settingsJson() const {
           {"light_samples", m_lightSamples},
           {"exact_segment", m_exactSegment},
           {"gather", m_hitGather ? "hit" : "march"},
-          {"view", std::array<const char*, 5>{"full", "direct", "indirect", "caustic", "field"}[size_t(m_view)]}};
+          {"view", kViewNames[size_t(m_view)]}};
 }
 
 nlohmann::json VoxelConeIntegrator::statsJson() const {

@@ -235,6 +235,8 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
 /// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1): opacity = sum of
 /// child opacities / 8; radiance = opacity-weighted mean; normal = opacity-weighted sum,
 /// renormalized; no albedo (see makeLevel). Preserves sum(opacity * radiance) * voxel volume exactly (before storage).
+/// For cones: axisFraction = opacity-weighted mean |normal| per axis, radianceAxes = radiance
+/// weighted by opacity * |normal| along each axis (the faces a cone along that axis sees).
 VoxelArrays restrictLevel(const Level& child) {
   std::vector<std::pair<uint64_t, uint32_t>> parents;
   parents.reserve(child.size());

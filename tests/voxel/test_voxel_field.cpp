@@ -233,6 +233,30 @@ TEST(VoxelMips, PreserveOpacityWeightedRadiance) {
   EXPECT_NEAR(m.opacity, 0.5f * (a.opacity + b.opacity), 1e-6f);
 }
 
+TEST(VoxelMips, APlaneIsOneCrossingAtEveryLevel) {
+  // What cones use for occlusion: along a line through a plane, sum of projected . |d| * step /
+  // finest voxel size over samples one voxel apart is the number of surfaces crossed. The
+  // trilinear tents sum to one and the mean coverage halves as the voxel doubles, so an
+  // axis-aligned plane is exactly one crossing at every level and any sample offset (up to
+  // the half-float storage of the coverage).
+  const Scene scene = shapesScene({planeAt(0.3f)});
+  VoxelSettings settings;
+  settings.level = 6;
+  settings.coarsestLevel = 2;
+  VoxelField field = VoxelField::voxelize(scene, settings);
+  field.buildMips();
+  const double v0 = field.voxelSize(6);
+  for (float level : {6.0f, 5.0f, 4.0f, 3.0f, 2.0f}) {
+    const double v = field.voxelSize(int(level));
+    for (double offset : {0.0, 0.37, 0.81}) {
+      double crossings = 0.0;
+      for (double z = offset * v; z < 1.0; z += v)
+        crossings += double(field.sample(Vec3(0.5f, 0.5f, float(z)), level).projected.z) * v / v0;
+      EXPECT_NEAR(crossings, 1.0, 2e-3) << "level " << level << " offset " << offset;
+    }
+  }
+}
+
 TEST(VoxelField, DeterministicAcrossThreadCounts) {
   const Scene scene = shapesScene({planeAt(0.0f), quadJson({0, 0, 0.1f}, {1, 0, 0.9f}, {1, 1, 0.9f}, {0, 1, 0.1f})});
   VoxelSettings settings;
