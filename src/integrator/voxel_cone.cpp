@@ -150,11 +150,8 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     return res;
   }
   if (m_exactSegment > 0.0f) {
-    Ray ray;
-    ray.origin = p + n * (1e-4f * m_v0);
-    ray.dir = d;
-    const float segment = m_exactSegment * m_v0;
-    ray.tMax = segment;
+    Ray ray = spawnRay(p, n, d);
+    ray.tMax = m_exactSegment * m_v0;
     if (const std::optional<Hit> hit = m_accel.intersect(ray)) {
       hitSurface = true;
       const Vec3 hp = ray.at(hit->t);
