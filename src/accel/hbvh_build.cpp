@@ -403,4 +403,11 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (progress) progress->finish();
 }
 
+bool intersectSurface(const Scene& scene, const Hbvh& accel, const Ray& ray, SurfaceHit& out) {
+  const std::optional<Hit> hit = accel.intersect(ray);
+  if (!hit) return false;
+  out = scene.surfaceAt(hit->triangle, ray.at(hit->t), hit->b1, hit->b2);
+  return true;
+}
+
 }  // namespace voxcone

@@ -25,10 +25,9 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
   float etaScale = 1.0f;       // removes radiance's 1/eta^2 from the roulette weight
 
   for (int depth = 0;; ++depth) {
-    const std::optional<Hit> hit = m_accel.intersect(ray);
-    if (!hit) break;
-    const Vec3 pos = ray.at(hit->t);
-    const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    SurfaceHit sh;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
 
     // Emission found by BSDF sampling, MIS-weighted against light sampling.

@@ -116,10 +116,9 @@ Vec3 PhotonMappingIntegrator::gather(Ray ray, Rng& rng, int depth) const {
   // bounces from a glossy vertex of this gather path (no shadow ray samples that).
   bool seenGlossy = false, countEmission = false;
   for (; depth < m_maxDepth; ++depth) {
-    const std::optional<Hit> hit = m_accel.intersect(ray);
-    if (!hit) break;
-    const Vec3 pos = ray.at(hit->t);
-    const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    SurfaceHit sh;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
     const Material& mat = m_scene.materials[sh.material];
     if (countEmission) L += beta * m_scene.emitted(sh, woWorld);
@@ -152,10 +151,9 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
   // bounce it is direct light at the glossy vertex, sampled there by shadow rays.
   bool countEmission = true;
   for (int depth = 0;; ++depth) {
-    const std::optional<Hit> hit = m_accel.intersect(ray);
-    if (!hit) break;
-    const Vec3 pos = ray.at(hit->t);
-    const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    SurfaceHit sh;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
     const Material& mat = m_scene.materials[sh.material];
     if (countEmission) L += beta * m_scene.emitted(sh, woWorld);

@@ -2,6 +2,7 @@
 
 #include "voxcone/integrator/voxel_cone.h"
 
+#include "delta_chain.h"
 #include "options.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
@@ -20,13 +21,23 @@ namespace {
 /// lie within half a voxel diagonal of it: a lookup of voxel size v at height h above a plane
 /// does not see the plane when v <= h / kClearance.
 constexpr float kClearance = 1.0f + 0.8660254f;
+/// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
 constexpr float kOpaque = 0.99f;
 /// Names of VoxelConeIntegrator::View, in order.
 const std::vector<std::string> kViewNames = {"full", "direct", "indirect", "caustic", "field"};
+
+/// The radiance of a sample's surfaces that face a cone of direction d (absD = |d|): each
+/// axis's radiance weighted by the projected area the cone sees along it.
+Vec3 radianceSeenAlong(const VoxelSample& s, const Vec3& absD) {
+  const Vec3 w = s.projected * absD;
+  const float wsum = w.x + w.y + w.z;
+  if (!(wsum > 0.0f)) return s.radiance;
+  return (w.x * s.radianceAxis[0] + w.y * s.radianceAxis[1] + w.z * s.radianceAxis[2]) / wsum;
+}
 }  // namespace
 
 VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
-    : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth), m_cones(6, 0.0f) {
+    : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth) {
   OptionReader r(c.options, "voxcone");
   constexpr int kMaxInt = std::numeric_limits<int>::max();
   bool anyDelta = false;
@@ -51,6 +62,7 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   const int cones = r.integer("cones", 6, 1, 256);
   const double angleDeg = r.number("cone_angle", 0.0, 0.0, 89.0);
   m_cones = ConeSet(cones, float(angleDeg * kPi / 180.0));
+  m_tanHalf = std::tan(m_cones.halfAngle());
   m_coneStep = float(r.number("cone_step", 1.0, 0.25, 4.0));
   const float sceneRadius = std::max(0.0f, m_scene.boundingSphere().radius);
   m_maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
@@ -141,12 +153,8 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const Vec3 ng = m_scene.surfaceAt(hit->triangle, hp, hit->b1, hit->b2).geomNormal;
     const Vec3 side = glm::dot(ng, d) < 0.0f ? ng : -ng;
     const VoxelSample s = m_field.sample(hp + side * (0.5f * v), float(m_finest) - std::log2(v / m_v0));
-    const Vec3 w = s.projected * glm::abs(d);
-    const float wsum = w.x + w.y + w.z;
-    res.radiance = wsum > 0.0f ? (w.x * s.radianceAxis[0] + w.y * s.radianceAxis[1] + w.z * s.radianceAxis[2]) / wsum
-                               : s.radiance;
+    res.radiance = radianceSeenAlong(s, glm::abs(d));
     res.occlusion = 1.0f;
-    res.samples = 1;
     return res;
   }
   if (m_exactSegment > 0.0f) {
@@ -177,7 +185,6 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const float level = float(m_finest) - std::log2(v / m_v0);
     const VoxelSample s = m_field.sample(x, level);
     const float step = m_coneStep * v;
-    ++res.samples;
     // Surfaces met over this step (VoxelSample::projected): a plane adds up to exactly one
     // crossing over the samples near it (the trilinear tents sum to one), which makes the
     // cone opaque. Occlusion accumulates linearly: the share of the cone's cross-section the
@@ -185,11 +192,7 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const float crossings = glm::dot(s.projected, absD) * step / m_v0;
     if (crossings > 0.0f) {
       const float a = std::min(1.0f - A, crossings);
-      // The radiance of the surfaces facing the cone: each axis's radiance weighted by the
-      // projected area the cone sees along it.
-      const Vec3 w = s.projected * absD;
-      const float wsum = w.x + w.y + w.z;
-      C += a * (w.x * s.radianceAxis[0] + w.y * s.radianceAxis[1] + w.z * s.radianceAxis[2]) / wsum;
+      C += a * radianceSeenAlong(s, absD);
       A += a;
     }
     t += step;
@@ -201,18 +204,6 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
   res.radiance = C;
   res.occlusion = A;
   return res;
-}
-
-Vec3 VoxelConeIntegrator::gatherIndirect(const Vec3& p, const Vec3& n, float rotation) const {
-  const Frame frame(n);
-  const float cr = std::cos(rotation), sr = std::sin(rotation);
-  const float tanHalf = std::tan(m_cones.halfAngle());
-  Vec3 sum(0.0f);
-  for (const Cone& cone : m_cones.cones()) {
-    const Vec3 a(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z);
-    sum += cone.weight * traceCone(p, n, frame.toWorld(a), tanHalf).radiance;
-  }
-  return sum;
 }
 
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const {
@@ -230,21 +221,17 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
   if (mat.isDiffuse()) {
     if (m_view != View::Indirect) L += m_field.causticRadiance(sh.position);
     if (m_view == View::Caustic) return L;
+    // The cone set turned by a random angle about the normal; each cone weighted by
+    // f(wo, axis) * pi * w_i, which is albedo * w_i for a Lambertian surface.
     const float rotation = 2.0f * kPi * rng.uniform();
-    if (mat.type == MaterialType::Lambertian) {
-      L += mat.albedo * gatherIndirect(sh.position, ng, rotation);
-    } else {
-      // Other diffuse BRDFs: each cone weighted by f(wo, axis) * pi.
-      const Frame geo(ng);
-      const float cr = std::cos(rotation), sr = std::sin(rotation);
-      const float tanHalf = std::tan(m_cones.halfAngle());
-      for (const Cone& cone : m_cones.cones()) {
-        const Vec3 a(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z);
-        const Vec3 d = geo.toWorld(a);
-        const Vec3 f = bsdfEval(mat, wo, frame.toLocal(d));
-        if (isBlack(f)) continue;
-        L += f * (kPi * cone.weight) * traceCone(sh.position, ng, d, tanHalf).radiance;
-      }
+    const float cr = std::cos(rotation), sr = std::sin(rotation);
+    const Frame geo(ng);
+    for (const Cone& cone : m_cones.cones()) {
+      const Vec3 d = geo.toWorld(
+          Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
+      const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
+      if (isBlack(f)) continue;
+      L += f * cone.weight * traceCone(sh.position, ng, d, m_tanHalf).radiance;
     }
     return L;
   }
@@ -256,36 +243,19 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
   if (!bsdfSample(mat, wo, uc, u, bs) || isBlack(bs.weight)) return L;
   const Vec3 d = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
-  const float tanHalf = std::clamp(mat.roughness, 0.01f, 1.0f);
+  // Roughness is in (0, 1]. Below 0.01 the cone would stay one finest voxel wide for over 100
+  // steps; the lookups cannot resolve less than a voxel anyway.
+  const float tanHalf = std::max(mat.roughness, 0.01f);
   L += bs.weight * traceCone(sh.position, side, d, tanHalf).radiance;
-  return L;
-}
-
-Vec3 VoxelConeIntegrator::trace(const Ray& ray, Rng& rng, int depth, float throughput) const {
-  const std::optional<Hit> hit = m_accel.intersect(ray);
-  if (!hit) return Vec3(0.0f);
-  const Vec3 pos = ray.at(hit->t);
-  const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
-  const Vec3 woWorld = -glm::normalize(ray.dir);
-  // Emission seen directly or through delta bounces (shadow rays sample it everywhere else).
-  Vec3 L = m_view == View::Full || m_view == View::Direct ? m_scene.emitted(sh, woWorld) : Vec3(0.0f);
-  const Material& mat = m_scene.materials[sh.material];
-  if (!mat.isDelta()) return L + shade(sh, woWorld, rng);
-  if (depth + 1 >= m_maxDepth) return L;
-  const Frame frame(sh.shadingNormal);
-  DeltaLobe lobes[2];
-  const int n = bsdfDeltaLobes(mat, frame.toLocal(woWorld), lobes);
-  for (int i = 0; i < n; ++i) {
-    const float branch = throughput * maxComponent(lobes[i].weight);
-    if (branch < 1e-3f) continue;  // cannot change the pixel visibly
-    L += lobes[i].weight * trace(spawnRay(pos, sh.geomNormal, frame.toWorld(lobes[i].wi)), rng, depth + 1, branch);
-  }
   return L;
 }
 
 Vec3 VoxelConeIntegrator::li(const Ray& ray, Rng& rng) const {
   if (!m_prepared) throw Error("voxcone: li() before prepare()");
-  return trace(ray, rng, 0, 1.0f);
+  // Emission is seen directly or through delta bounces (shadow rays sample it elsewhere).
+  const bool emission = m_view == View::Full || m_view == View::Direct;
+  return traceDeltaChains(m_scene, m_accel, ray, rng, m_maxDepth, emission,
+                          [this](const SurfaceHit& sh, const Vec3& wo, Rng& r) { return shade(sh, wo, r); });
 }
 
 }  // namespace voxcone

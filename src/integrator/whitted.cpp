@@ -1,5 +1,6 @@
 #include "voxcone/integrator/whitted.h"
 
+#include "delta_chain.h"
 #include "options.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/scene/bsdf.h"
@@ -37,31 +38,11 @@ Vec3 estimateDirectLight(const Scene& scene, const Hbvh& accel, const SurfaceHit
   return sum / static_cast<float>(samples);
 }
 
-Vec3 WhittedIntegrator::li(const Ray& ray, Rng& rng) const { return trace(ray, rng, 0, 1.0f); }
-
-Vec3 WhittedIntegrator::trace(const Ray& ray, Rng& rng, int depth, float throughput) const {
-  const std::optional<Hit> hit = m_accel.intersect(ray);
-  if (!hit) return Vec3(0.0f);
-  const Vec3 pos = ray.at(hit->t);
-  const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
-  const Vec3 woWorld = -glm::normalize(ray.dir);
-  Vec3 L = m_scene.emitted(sh, woWorld);
-  const Material& mat = m_scene.materials[sh.material];
-  if (!mat.isDelta()) return L + estimateDirectLight(m_scene, m_accel, sh, woWorld, rng, m_lightSamples);
-  if (depth + 1 >= m_maxDepth) return L;
-  // Delta surface: follow every lobe (reflection and refraction both, for glass).
-  const Frame frame(sh.shadingNormal);
-  DeltaLobe lobes[2];
-  const int n = bsdfDeltaLobes(mat, frame.toLocal(woWorld), lobes);
-  for (int i = 0; i < n; ++i) {
-    // Splitting at every dielectric doubles the rays per level; drop branches whose
-    // accumulated weight is below 1/1000 (they cannot change the pixel visibly).
-    const float branch = throughput * maxComponent(lobes[i].weight);
-    if (branch < 1e-3f) continue;
-    const Ray next = spawnRay(pos, sh.geomNormal, frame.toWorld(lobes[i].wi));
-    L += lobes[i].weight * trace(next, rng, depth + 1, branch);
-  }
-  return L;
+Vec3 WhittedIntegrator::li(const Ray& ray, Rng& rng) const {
+  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Rng& r) {
+    return estimateDirectLight(m_scene, m_accel, sh, wo, r, m_lightSamples);
+  };
+  return traceDeltaChains(m_scene, m_accel, ray, rng, m_maxDepth, true, direct);
 }
 
 }  // namespace voxcone

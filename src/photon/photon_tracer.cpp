@@ -61,10 +61,9 @@ void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lig
   // diffuse hit then ends a path L S+ D (a caustic).
   bool specularOnly = true;
   for (int segment = 1; segment <= settings.maxDepth; ++segment) {
-    const std::optional<Hit> hit = accel.intersect(ray);
-    if (!hit) return;  // escaped the scene
-    const Vec3 pos = ray.at(hit->t);
-    const SurfaceHit sh = scene.surfaceAt(hit->triangle, pos, hit->b1, hit->b2);
+    SurfaceHit sh;
+    if (!intersectSurface(scene, accel, ray, sh)) return;  // escaped the scene
+    const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
     if (!isFinite(pos) || !isFinite(sh.shadingNormal) || !isFinite(woWorld)) return;
     const Material& mat = scene.materials[sh.material];

@@ -21,6 +21,7 @@
 namespace voxcone {
 
 class Scene;
+struct SurfaceHit;
 
 /// Build settings (cf. Embree's RTCBuildArguments).
 struct HbvhBuildSettings {
@@ -111,5 +112,9 @@ private:
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
   std::vector<Triangle4> m_tris;    ///< leaf triangles, four to a packet, in leaf order
 };
+
+/// The surface `ray` hits first: Scene::surfaceAt at accel's closest hit. False when it hits
+/// nothing (out is left alone).
+bool intersectSurface(const Scene& scene, const Hbvh& accel, const Ray& ray, SurfaceHit& out);
 
 }  // namespace voxcone

@@ -27,6 +27,7 @@ struct Cone {
 
 class ConeSet {
 public:
+  ConeSet() = default;  ///< no cones
   /// `count` cones in [1, 256]; halfAngle in radians, <= 0 for the default acos(1 - 1/N).
   ConeSet(int count, float halfAngle);
   const std::vector<Cone>& cones() const { return m_cones; }

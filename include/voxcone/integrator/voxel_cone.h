@@ -23,9 +23,13 @@
 /// has variance r^2 / 4 per axis, and a trilinear lookup in a mip of voxel size v (box of the
 /// voxel, variance v^2 / 12, convolved with the tent, v^2 / 6) has v^2 / 4, so the level is the
 /// one with v = r (fractional levels blend two mips). Along the axis the samples are spaced by
-/// `cone_step` * v (1: the Gaussians' 2 sigma), and the sample's occlusion a, given for a path
-/// of length v through a voxel, becomes 1 - (1 - a)^(step / v). Radiance is composited with
-/// C += (1 - A) a L, A += (1 - A) a until A > 0.99, the cone leaves the field or max_distance.
+/// `cone_step` * v (1: the Gaussians' 2 sigma). A step meets a = dot(projected, |d|) * step / v0
+/// surfaces (VoxelSample::projected; a plane adds up to exactly one crossing at every level), and
+/// occlusion accumulates linearly, a' = min(a, 1 - A): C += a' L, A += a', with L the radiance of
+/// the faces that face the cone (VoxelSample::radianceAxis), until A > 0.99, the cone leaves the
+/// field or max_distance. Linear accumulation keeps one wall exactly opaque (the furnace holds)
+/// but counts surfaces near a wide cone's rim at every step (over-occlusion, see the note in
+/// the tests); multiplicative compositing lets a wall split over two samples leak instead.
 ///
 /// Self-occlusion: the shading point's own surface fills voxels whose centres lie within half
 /// a voxel diagonal (sqrt(3)/2 v) of it, and a trilinear lookup reaches 1 v from its centre, so
@@ -73,7 +77,6 @@ namespace voxcone {
 struct ConeResult {
   Vec3 radiance{0.0f};
   float occlusion = 0.0f;  ///< accumulated opacity A
-  int samples = 0;         ///< voxel lookups (steps)
 };
 
 class VoxelConeIntegrator final : public Integrator {
@@ -92,12 +95,8 @@ public:
   /// March one cone from surface point p (unit normal n on the side the cone leaves, unit
   /// direction d with dot(n, d) > 0 expected) of half-angle atan(tanHalf). Public for tests.
   ConeResult traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const;
-  /// Indirect radiance reflected by a Lambertian surface of albedo 1 facing n: the
-  /// cone-weighted sum with the cone set rotated by `rotation` radians about n.
-  Vec3 gatherIndirect(const Vec3& p, const Vec3& n, float rotation) const;
 
 private:
-  Vec3 trace(const Ray& ray, Rng& rng, int depth, float throughput) const;
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const;
 
   const Scene& m_scene;
@@ -106,6 +105,7 @@ private:
   PhotonSettings m_photonSettings;
   VoxelSettings m_voxelSettings;
   ConeSet m_cones;
+  float m_tanHalf = 0.0f;       ///< tan of the cones' half-angle
   float m_coneStep = 1.0f;
   float m_maxDistance = 0.0f;
   int m_lightSamples = 1;

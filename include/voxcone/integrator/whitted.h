@@ -17,8 +17,6 @@ public:
   nlohmann::json settingsJson() const override;
 
 private:
-  /// `throughput`: the largest channel of the product of lobe weights so far.
-  Vec3 trace(const Ray& ray, Rng& rng, int depth, float throughput) const;
   const Scene& m_scene;
   const Hbvh& m_accel;
   int m_maxDepth;
