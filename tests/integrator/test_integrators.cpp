@@ -3,7 +3,6 @@
 
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
-#include "voxcone/core/parallel.h"
 #include "voxcone/integrator/integrator.h"
 
 #include "../support/render_helpers.h"
@@ -57,7 +56,7 @@ TEST(Furnace, WhittedPointLightGivesDirectLightOnly) {
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(meanAndStdErr(r.image, c).first, 0.5, 0.005);
 }
 
-Scene cornellBox() { return loadScene(test::sourceDir() + "/data/scenes/cornell-box.json"); }
+using test::cornellBox;
 
 TEST(CornellBox, RedWallIsOnTheLeft) {
   const Scene scene = cornellBox();
@@ -102,17 +101,8 @@ TEST(Determinism, SameImageAtOneAndTwoThreads) {
   RenderSettings s = scene.render;
   s.width = s.height = 40;  // not a multiple of the tile size
   s.spp = 4;
-  for (const std::string method : {"path", "whitted"}) {
-    Image images[2];
-    for (int threads : {1, 2}) {
-      ThreadLimit limit(threads);
-      images[threads - 1] = renderWith(scene, method, s).image;
-    }
-    ASSERT_EQ(images[0].pixels.size(), images[1].pixels.size());
-    size_t diff = 0;
-    for (size_t i = 0; i < images[0].pixels.size(); ++i) diff += images[0].pixels[i] != images[1].pixels[i];
-    EXPECT_EQ(diff, 0u) << method;
-  }
+  for (const std::string method : {"path", "whitted"})
+    EXPECT_EQ(test::pixelsDifferingAcrossThreads(scene, method, s), 0u) << method;
 }
 
 TEST(Integrators, UnknownMethodAndOptionsAreErrors) {

@@ -3,7 +3,6 @@
 
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
-#include "voxcone/core/parallel.h"
 #include "voxcone/integrator/integrator.h"
 
 #include "../support/render_helpers.h"
@@ -16,11 +15,8 @@ namespace {
 
 using test::renderWith;
 
-Vec3 imageMean(const Image& img) {
-  DVec3 s(0.0);
-  for (const Vec3& p : img.pixels) s += DVec3(p);
-  return Vec3(s / double(img.pixels.size()));
-}
+using test::cornellBox;
+using test::imageMean;
 
 TEST(PhotonMapping, PointLightFurnaceGivesOne) {
   // Kd = 0.5, I = pi at the centre of a unit sphere: direct 0.5 (shadow rays) plus indirect
@@ -48,7 +44,6 @@ TEST(PhotonMapping, EmissiveFurnaceGivesTwo) {
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 2.0, 0.04);
 }
 
-Scene cornellBox() { return loadScene(test::sourceDir() + "/data/scenes/cornell-box.json"); }
 
 TEST(PhotonMapping, CornellBoxMeanMatchesPath) {
   const Scene scene = cornellBox();
@@ -66,17 +61,9 @@ TEST(PhotonMapping, SameImageAtOneAndTwoThreads) {
   RenderSettings s = scene.render;
   s.width = s.height = 40;  // not a multiple of the tile size
   s.spp = 2;
-  for (int gather : {0, 4}) {
-    Image images[2];
-    for (int threads : {1, 2}) {
-      ThreadLimit limit(threads);
-      images[threads - 1] = renderWith(scene, "pm", s, {{"photons", 50000}, {"final_gather", gather}}).image;
-    }
-    ASSERT_EQ(images[0].pixels.size(), images[1].pixels.size());
-    size_t diff = 0;
-    for (size_t i = 0; i < images[0].pixels.size(); ++i) diff += images[0].pixels[i] != images[1].pixels[i];
-    EXPECT_EQ(diff, 0u) << "final_gather " << gather;
-  }
+  for (int gather : {0, 4})
+    EXPECT_EQ(test::pixelsDifferingAcrossThreads(scene, "pm", s, {{"photons", 50000}, {"final_gather", gather}}), 0u)
+        << "final_gather " << gather;
 }
 
 TEST(PhotonMapping, BadOptionsAreSettingsErrors) {

@@ -2,7 +2,6 @@
 // agreement with path tracing, determinism across thread counts, option errors.
 
 #include "voxcone/core/error.h"
-#include "voxcone/core/parallel.h"
 #include "voxcone/integrator/cone_set.h"
 #include "voxcone/integrator/integrator.h"
 
@@ -16,14 +15,9 @@ namespace {
 
 using test::renderWith;
 
-Vec3 mean(const Image& img, int x0, int x1) {
-  DVec3 s(0.0);
-  int n = 0;
-  for (int y = 0; y < img.height; ++y)
-    for (int x = x0; x < x1; ++x, ++n) s += DVec3(img.pixels[size_t(y) * img.width + x]);
-  return Vec3(s / double(n));
-}
-Vec3 mean(const Image& img) { return mean(img, 0, img.width); }
+using test::cornellBox;
+
+using test::imageMean;
 
 TEST(ConeSet, WeightsAreTheCosineMeasureOfEachCell) {
   for (int n : {1, 6, 16, 64}) {
@@ -57,7 +51,7 @@ TEST(VoxelCone, EmissiveFurnaceGivesTwo) {
     for (int level : {5, 6}) {
       const RenderResult r =
           renderWith(scene, "voxcone", scene.render, {{"photons", 100000}, {"level", level}, {"gather", gather}});
-      const Vec3 m = mean(r.image);
+      const Vec3 m = imageMean(r.image);
       for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 2.0, 0.04) << gather << " level " << level;
       EXPECT_EQ(r.invalidSamples, 0u);
     }
@@ -67,7 +61,7 @@ TEST(VoxelCone, PointLightFurnaceGivesOne) {
   // Kd = 0.5, I = pi at the centre of a unit sphere: direct 0.5 + indirect 0.5.
   const Scene scene = test::furnaceScene(0.5f, 0.0f, kPi, 4, 2);
   for (int cones : {6, 16}) {
-    const Vec3 m = mean(renderWith(scene, "voxcone", scene.render, {{"photons", 100000}, {"level", 5}, {"cones", cones}}).image);
+    const Vec3 m = imageMean(renderWith(scene, "voxcone", scene.render, {{"photons", 100000}, {"level", 5}, {"cones", cones}}).image);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 1.0, 0.02) << cones << " cones";
   }
 }
@@ -82,17 +76,17 @@ TEST(VoxelCone, ThinWallLeakIsMeasuredAndExactSegmentsCutIt) {
   s.height = 16;
   s.spp = 4;
   const Image path = renderWith(scene, "path", s).image;
-  EXPECT_EQ(mean(path, 0, 15).x, 0.0f);  // no light path reaches the right room
+  EXPECT_EQ(imageMean(path, 0, 15).x, 0.0f);  // no light path reaches the right room
   auto leak = [&](double segment) {
     const Image img = renderWith(scene, "voxcone", s, {{"level", 5}, {"photons", 50000}, {"exact_segment", segment}}).image;
-    return mean(img, 0, 15).x / mean(img, 17, 32).x;
+    return imageMean(img, 0, 15).x / imageMean(img, 17, 32).x;
   };
   const float before = leak(0.0), after = leak(64.0);
   const Image hit = renderWith(scene, "voxcone", s, {{"level", 5}, {"photons", 50000}, {"gather", "hit"}}).image;
   // gather = "hit" has exact visibility everywhere but filters the radiance at the hit over the
   // cone's width, and that lookup reaches through the wall: it leaks as much as no mitigation
   // (measured 2.3% at level 5, 2.2% at level 6). This shows the failure.
-  EXPECT_GT(mean(hit, 0, 15).x / mean(hit, 17, 32).x, 0.01f);
+  EXPECT_GT(imageMean(hit, 0, 15).x / imageMean(hit, 17, 32).x, 0.01f);
   // Measured (64x32, 16 spp): 2.5% before, 0.7% after.
   EXPECT_GT(before, 0.01f);
   EXPECT_LT(after, 0.5f * before);
@@ -103,30 +97,22 @@ TEST(VoxelCone, CornellBoxMeanMatchesPath) {
   // The cones' linear occlusion overweights surfaces near a wide cone's rim (over-occlusion:
   // indirect light on the walls comes out about a third too high), so the image mean sits
   // above path tracing: measured +6.3%, +6.9%, +4.9% (r, g, b); this bounds it at 8%.
-  const Scene scene = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
+  const Scene scene = cornellBox();
   RenderSettings s = scene.render;
   s.width = s.height = 32;
   s.spp = 1024;
-  const Vec3 ref = mean(renderWith(scene, "path", s).image);
+  const Vec3 ref = imageMean(renderWith(scene, "path", s).image);
   s.spp = 16;
-  const Vec3 vc = mean(renderWith(scene, "voxcone", s, {{"photons", 100000}, {"level", 6}}).image);
+  const Vec3 vc = imageMean(renderWith(scene, "voxcone", s, {{"photons", 100000}, {"level", 6}}).image);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(vc[c], ref[c], 0.08 * ref[c]) << "channel " << c;
 }
 
 TEST(VoxelCone, SameImageAtOneAndTwoThreads) {
-  const Scene scene = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
+  const Scene scene = cornellBox();
   RenderSettings s = scene.render;
   s.width = s.height = 40;  // not a multiple of the tile size
   s.spp = 2;
-  Image images[2];
-  for (int threads : {1, 2}) {
-    ThreadLimit limit(threads);
-    images[threads - 1] = renderWith(scene, "voxcone", s, {{"photons", 50000}, {"level", 6}}).image;
-  }
-  ASSERT_EQ(images[0].pixels.size(), images[1].pixels.size());
-  size_t diff = 0;
-  for (size_t i = 0; i < images[0].pixels.size(); ++i) diff += images[0].pixels[i] != images[1].pixels[i];
-  EXPECT_EQ(diff, 0u);
+EXPECT_EQ(test::pixelsDifferingAcrossThreads(scene, "voxcone", s, {{"photons", 50000}, {"level", 6}}), 0u);
 }
 
 TEST(VoxelCone, BadOptionsAreSettingsErrors) {

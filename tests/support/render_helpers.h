@@ -2,7 +2,10 @@
 // Rendering a scene with an integrator by name, for the integrator tests.
 
 #include "voxcone/accel/hbvh.h"
+#include "voxcone/core/parallel.h"
 #include "voxcone/integrator/integrator.h"
+
+#include "test_scenes.h"
 
 #include <nlohmann/json.hpp>
 
@@ -20,5 +23,31 @@ inline RenderResult renderWith(const Scene& scene, const std::string& method, Re
   integrator->prepare(nullptr);
   return renderImage(scene, *integrator, settings);
 }
+
+/// Mean of columns [x0, x1) of `img` (x1 < 0: up to the width), over all rows.
+inline Vec3 imageMean(const Image& img, int x0 = 0, int x1 = -1) {
+  if (x1 < 0) x1 = img.width;
+  DVec3 s(0.0);
+  for (int y = 0; y < img.height; ++y)
+    for (int x = x0; x < x1; ++x) s += DVec3(img.pixels[size_t(y) * img.width + x]);
+  return Vec3(s / double(size_t(img.height) * size_t(x1 - x0)));
+}
+
+/// Pixels that differ between renders at 1 and 2 threads (0 when rendering is deterministic).
+inline size_t pixelsDifferingAcrossThreads(const Scene& scene, const std::string& method, const RenderSettings& s,
+                                           const nlohmann::json& options = nlohmann::json::object()) {
+  Image images[2];
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    images[threads - 1] = renderWith(scene, method, s, options).image;
+  }
+  if (images[0].pixels.size() != images[1].pixels.size()) return images[0].pixels.size() + images[1].pixels.size();
+  size_t diff = 0;
+  for (size_t i = 0; i < images[0].pixels.size(); ++i) diff += images[0].pixels[i] != images[1].pixels[i];
+  return diff;
+}
+
+/// The canonical Cornell box of data/scenes.
+inline Scene cornellBox() { return loadScene(sourceDir() + "/data/scenes/cornell-box.json"); }
 
 }  // namespace voxcone::test
