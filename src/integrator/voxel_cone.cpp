@@ -129,6 +129,20 @@ void VoxelConeIntegrator::prepare(Progress* progress) {
   setField(std::move(field));
 }
 
+std::optional<VoxelConeIntegrator::AxisHit> VoxelConeIntegrator::hitAlongAxis(const Vec3& p, const Vec3& n,
+                                                                             const Vec3& d, float tMax) const {
+  Ray ray = spawnRay(p, n, d);
+  ray.tMax = tMax;
+  const std::optional<Hit> hit = m_accel.intersect(ray);
+  if (!hit) return std::nullopt;
+  AxisHit out;
+  out.t = hit->t;
+  out.position = ray.at(hit->t);
+  const Vec3 ng = m_scene.surfaceAt(hit->triangle, out.position, hit->b1, hit->b2).geomNormal;
+  out.side = glm::dot(ng, d) < 0.0f ? ng : -ng;
+  return out;
+}
+
 ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const {
   ConeResult res;
   const float cosPhi = glm::dot(n, d);
@@ -139,34 +153,24 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
   float A = 0.0f;
   Vec3 C(0.0f);
   float tEnd = m_maxDistance;
-  // Exact visibility along the axis for the first segment (leak mitigation).
   bool hitSurface = false;
   Vec3 hitRadiance(0.0f);
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
-    Ray ray = spawnRay(p, n, d);
-    ray.tMax = m_maxDistance;
-    const std::optional<Hit> hit = m_accel.intersect(ray);
+    const std::optional<AxisHit> hit = hitAlongAxis(p, n, d, m_maxDistance);
     if (!hit) return res;
-    const Vec3 hp = ray.at(hit->t);
     const float v = std::clamp(hit->t * tanHalf, m_v0, vMax);
-    const Vec3 ng = m_scene.surfaceAt(hit->triangle, hp, hit->b1, hit->b2).geomNormal;
-    const Vec3 side = glm::dot(ng, d) < 0.0f ? ng : -ng;
-    const VoxelSample s = m_field.sample(hp + side * (0.5f * v), float(m_finest) - std::log2(v / m_v0));
+    const VoxelSample s = m_field.sample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0));
     res.radiance = radianceSeenAlong(s, glm::abs(d));
     res.occlusion = 1.0f;
     return res;
   }
+  // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
-    Ray ray = spawnRay(p, n, d);
-    ray.tMax = m_exactSegment * m_v0;
-    if (const std::optional<Hit> hit = m_accel.intersect(ray)) {
+    if (const std::optional<AxisHit> hit = hitAlongAxis(p, n, d, m_exactSegment * m_v0)) {
       hitSurface = true;
-      const Vec3 hp = ray.at(hit->t);
-      const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, hp, hit->b1, hit->b2);
-      const Vec3 side = glm::dot(sh.geomNormal, d) < 0.0f ? sh.geomNormal : -sh.geomNormal;
       // The finest level around the hit, half a voxel towards the ray's side.
-      hitRadiance = m_field.sample(hp + side * (0.5f * m_v0), float(m_finest)).radiance;
+      hitRadiance = m_field.sample(hit->position + hit->side * (0.5f * m_v0), float(m_finest)).radiance;
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);
@@ -179,8 +183,10 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const float v = std::clamp(std::min(t * tanHalf, h / kClearance), m_v0, vMax);
     if (hitSurface && t + kClearance * v > tEnd) break;
     const Vec3 x = origin + d * t;
-    // Outside the field by more than a lookup's reach: nothing more to gather.
-    const Vec3 reach(2.0f * v);
+    // Outside the field by more than a lookup's reach: nothing more to gather. Voxel centres lie
+    // half a voxel inside the field and a trilinear lookup reaches one voxel from them; the
+    // coarser of the two blended mips has voxels up to 2 v: 1.5 * 2 v.
+    const Vec3 reach(3.0f * v);
     if (!Bounds3(m_fieldBounds.lo - reach, m_fieldBounds.hi + reach).contains(x)) break;
     const float level = float(m_finest) - std::log2(v / m_v0);
     const VoxelSample s = m_field.sample(x, level);

@@ -71,6 +71,8 @@
 #include "voxcone/photon/photon_tracer.h"
 #include "voxcone/voxel/voxel_field.h"
 
+#include <optional>
+
 namespace voxcone {
 
 /// Radiance and opacity a cone gathered.
@@ -98,6 +100,13 @@ public:
 
 private:
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const;
+  /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
+  /// the hit surface's normal turned towards the ray's side.
+  struct AxisHit {
+    float t = 0.0f;
+    Vec3 position{0.0f}, side{0.0f};
+  };
+  std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& n, const Vec3& d, float tMax) const;
 
   const Scene& m_scene;
   const Hbvh& m_accel;
