@@ -189,16 +189,16 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const Vec3 reach(3.0f * v);
     if (!Bounds3(m_fieldBounds.lo - reach, m_fieldBounds.hi + reach).contains(x)) break;
     const float level = float(m_finest) - std::log2(v / m_v0);
-    const VoxelSample s = m_field.sample(x, level);
+    const ConeSample s = m_field.coneSample(x, level, absD);
     const float step = m_coneStep * v;
     // Surfaces met over this step (VoxelSample::projected): a plane adds up to exactly one
     // crossing over the samples near it (the trilinear tents sum to one), which makes the
     // cone opaque. Occlusion accumulates linearly: the share of the cone's cross-section the
     // step's surfaces cover, up to what is still open.
-    const float crossings = glm::dot(s.projected, absD) * step / m_v0;
+    const float crossings = s.density * step / m_v0;
     if (crossings > 0.0f) {
       const float a = std::min(1.0f - A, crossings);
-      C += a * radianceSeenAlong(s, absD);
+      C += a * s.radiance;
       A += a;
     }
     t += step;

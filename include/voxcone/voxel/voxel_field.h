@@ -59,6 +59,16 @@ struct VoxelSample {
   Vec3 radianceAxis[3] = {Vec3(0.0f), Vec3(0.0f), Vec3(0.0f)};
 };
 
+/// What a cone of unit direction d takes from one lookup: VoxelSample reduced to the two
+/// numbers the cone composites with, computed in float without decoding normals.
+struct ConeSample {
+  /// dot(projected, |d|): surfaces met per finest voxel size of travel along d.
+  float density = 0.0f;
+  /// Radiance the cone sees: sum_a |d_a| projected_a radianceAxis[a] / density; zero when
+  /// density is zero.
+  Vec3 radiance{0.0f};
+};
+
 /// The voxel field. Build, then inject photons, then build the mips.
 class VoxelField {
 public:
@@ -104,6 +114,8 @@ public:
   VoxelSample lookup(const Vec3& worldPos, int level) const;
   /// Trilinear at an integer level, linear between levels for fractional `level` (what cones use).
   VoxelSample sample(const Vec3& worldPos, float level) const;
+  /// sample(worldPos, level) as a cone of direction d (absD = |d|) sees it (the cones' hot path).
+  ConeSample coneSample(const Vec3& worldPos, float level, const Vec3& absD) const;
   /// Caustic radiance at worldPos (trilinear in the caustic grid); zero without one.
   Vec3 causticRadiance(const Vec3& worldPos) const;
 
