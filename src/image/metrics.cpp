@@ -161,7 +161,9 @@ nlohmann::json ImageMetrics::toJson() const {
   // does any non-finite value.
   const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return nlohmann::json{{"relmse", number(relMse)}, {"mse", number(mse)}, {"psnr_srgb8", number(psnrSrgb8)},
-                        {"ssim", number(ssim)}};
+                        {"ssim", number(ssim)},
+                        {"mean", {number(meanTest.x), number(meanTest.y), number(meanTest.z)}},
+                        {"mean_reference", {number(meanReference.x), number(meanReference.y), number(meanReference.z)}}};
 }
 
 ImageMetrics compareImages(const Image& test, const Image& reference) {
@@ -178,6 +180,8 @@ ImageMetrics compareImages(const Image& test, const Image& reference) {
     const Vec3& r = reference.pixels[i];
     for (int c = 0; c < 3; ++c) {
       const double d = double(t[c]) - double(r[c]);
+      m.meanTest[c] += double(t[c]);
+      m.meanReference[c] += double(r[c]);
       sqSum += d * d;
       // eps keeps dark reference pixels from dominating (Rousselle et al. 2011).
       relSum += d * d / (sqr(double(r[c])) + kRelMseEpsilon);
@@ -188,6 +192,8 @@ ImageMetrics compareImages(const Image& test, const Image& reference) {
   const double count = 3.0 * double(n);
   m.relMse = relSum / count;
   m.mse = sqSum / count;
+  m.meanTest /= double(n);
+  m.meanReference /= double(n);
   const double mse8 = double(sq8Sum) / count;
   m.psnrSrgb8 = sq8Sum == 0 ? std::numeric_limits<double>::infinity() : 10.0 * std::log10(255.0 * 255.0 / mse8);
 

@@ -21,12 +21,14 @@
 ///                     Efficient Representations for Independent Unit Vectors"; < 1 degree
 ///                     error), stored renormalized (the opacity-weighted sum's length is not kept)
 ///   albedo    3 x uint8 linear [0, 1]
-///   radiance  uint32  RGB9E5 shared exponent (EXT_texture_shared_exponent): 9-bit mantissas,
-///                     relative error <= 2^-10 on the largest channel, range [0, 65408] W/(sr m^2)
-/// 11 bytes per voxel at the finest level (8 without albedo in the mips) plus ~2 bytes of
-/// topology: cornell-dragon level 10 (5.9 M voxels, 7.9 M with the mips) takes 92.8 MiB
-/// (97.3 MB). 2x16-bit normals and 3 x half radiance (15 bytes) took 135 MB; albedo in every
-/// mip and 32^3 root children 101.3 MiB.
+///   radiance  2 x uint32 front and back side, RGB9E5 shared exponent (EXT_texture_shared_exponent):
+///                     9-bit mantissas, relative error <= 2^-10 on the largest channel, range
+///                     [0, 65408] W/(sr m^2)
+///   axes      3 x uint8 mips only: opacity-weighted mean |normal| per axis
+/// 15 bytes per voxel at the finest level (15 in the mips: axes instead of albedo) plus ~2
+/// bytes of topology. With one radiance per voxel (sides mixed) cornell-dragon level 10 (5.9 M
+/// voxels, 7.9 M with the mips) took 92.8 MiB; 2x16-bit normals and 3 x half radiance (15
+/// bytes) took 135 MB; albedo in every mip and 32^3 root children 101.3 MiB.
 
 #include "voxcone/voxel/voxel_field.h"
 
@@ -130,14 +132,15 @@ struct Level {
   std::vector<Half> coverage;
   std::vector<uint16_t> normal;
   std::vector<uint8_t> albedo;          ///< 3 per voxel
-  std::vector<uint32_t> radiance;       ///< RGB9E5; empty before injection
+  /// Surfaces are two-sided and each side keeps its own light (a panel lit from above stays
+  /// dark below): RGB9E5 radiance of the front (the side the voxel's normal points to) and of
+  /// the back; both empty before injection. Coarser levels: opacity-weighted means of the
+  /// children's sides, after turning each child to agree with the parent's normal.
+  std::vector<uint32_t> radiance;
+  std::vector<uint32_t> radianceBack;
   /// Mips only: opacity-weighted mean of |normal| per axis, 3 unorm8 per voxel (the finest
   /// level takes |normal| of its one mean normal).
   std::vector<uint8_t> axisFraction;
-  /// Mips only: radiance seen along each axis, 3 RGB9E5 per voxel: the children's radiance
-  /// weighted by their surface's projected area along that axis (a face seen edge-on adds
-  /// nothing). The finest level's one radiance stands for all three.
-  std::vector<uint32_t> radianceAxes;
   double buildSeconds = 0.0;
 
   size_t size() const { return coverage.size(); }
@@ -157,13 +160,16 @@ struct Level {
   Vec3 albedoAt(size_t v) const {
     return Vec3(decodeUnorm8(albedo[3 * v]), decodeUnorm8(albedo[3 * v + 1]), decodeUnorm8(albedo[3 * v + 2]));
   }
+  /// Both sides' radiance summed.
   Vec3 radianceAt(size_t v) const {
-    return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
+    return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]) + decodeRgb9e5(radianceBack[v]);
+  }
+  /// Radiance of the side of voxel v's surface that a ray of direction d sees.
+  Vec3 radianceSeenAlong(size_t v, const Vec3& d) const {
+    if (radiance.empty()) return Vec3(0.0f);
+    return decodeRgb9e5(glm::dot(decodeNormalDirection(normal[v]), d) <= 0.0f ? radiance[v] : radianceBack[v]);
   }
   Vec3 normalAt(size_t v) const { return decodeNormal(normal[v]); }
-  Vec3 radianceAxisAt(size_t v, int axis) const {
-    return radianceAxes.empty() ? radianceAt(v) : decodeRgb9e5(radianceAxes[3 * v + size_t(axis)]);
-  }
   Vec3 axisFractionAt(size_t v) const {
     if (axisFraction.empty()) return glm::abs(normalAt(v));
     return Vec3(decodeUnorm8(axisFraction[3 * v]), decodeUnorm8(axisFraction[3 * v + 1]),
@@ -186,9 +192,12 @@ struct Level {
     }
   }
 
-  void setRadiance(const std::vector<Vec3>& values) {
+  /// Set the radiance of both sides.
+  void setRadiance(const std::vector<Vec3>& values, const std::vector<Vec3>& back) {
     radiance.resize(values.size());
     for (size_t v = 0; v < values.size(); ++v) radiance[v] = encodeRgb9e5(values[v]);
+    radianceBack.resize(back.size());
+    for (size_t v = 0; v < back.size(); ++v) radianceBack[v] = encodeRgb9e5(back[v]);
   }
 
   uint64_t topologyBytes() const {
@@ -231,10 +240,7 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
     if (!a.albedo.empty())
       for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
   }
-  if (!a.radiance.empty()) out.setRadiance(a.radiance);
-  out.radianceAxes.resize(3 * a.radianceAxes.size());
-  for (size_t v = 0; v < a.radianceAxes.size(); ++v)
-    for (int c = 0; c < 3; ++c) out.radianceAxes[3 * v + c] = encodeRgb9e5(a.radianceAxes[v][c]);
+  if (!a.radiance.empty()) out.setRadiance(a.radiance, a.radianceBack);
   out.axisFraction.resize(3 * a.axisFraction.size());
   for (size_t v = 0; v < a.axisFraction.size(); ++v)
     for (int c = 0; c < 3; ++c) out.axisFraction[3 * v + c] = encodeUnorm8(a.axisFraction[v][c]);
@@ -242,10 +248,11 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
 }
 
 /// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1): opacity = sum of
-/// child opacities / 8; radiance = opacity-weighted mean; normal = opacity-weighted sum,
-/// renormalized; no albedo (see makeLevel). Preserves sum(opacity * radiance) * voxel volume exactly (before storage).
-/// For cones: axisFraction = opacity-weighted mean |normal| per axis, radianceAxes = radiance
-/// weighted by opacity * |normal| along each axis (the faces a cone along that axis sees).
+/// child opacities / 8; no albedo (see makeLevel). Surfaces are two-sided, so each child is
+/// first turned to agree with the most opaque child's normal (its front and back swapped when
+/// turned); normal = opacity-weighted sum of the turned normals, renormalized; front and back
+/// radiance = opacity-weighted means (sum(opacity * radiance) * voxel volume is preserved before
+/// storage). For cones: axisFraction = opacity-weighted mean |normal| per axis.
 VoxelArrays restrictLevel(const Level& child) {
   std::vector<std::pair<uint64_t, uint32_t>> parents;
   parents.reserve(child.size());
@@ -257,33 +264,37 @@ VoxelArrays restrictLevel(const Level& child) {
   VoxelArrays out;
   const bool lit = !child.radiance.empty();
   for (size_t a = 0; a < parents.size();) {
-    size_t b = a;
+    size_t end = a;
+    size_t ref = parents[a].second;
+    for (; end < parents.size() && parents[end].first == parents[a].first; ++end)
+      if (child.opacity(parents[end].second) > child.opacity(ref)) ref = parents[end].second;
+    const Vec3 refNormal = child.normalAt(ref);
     double opSum = 0.0;
-    DVec3 rad(0.0), nrm(0.0), axes(0.0), radAxis[3] = {DVec3(0.0), DVec3(0.0), DVec3(0.0)};
-    for (; b < parents.size() && parents[b].first == parents[a].first; ++b) {
+    DVec3 front(0.0), back(0.0), nrm(0.0), axes(0.0);
+    for (size_t b = a; b < end; ++b) {
       const size_t c = parents[b].second;
       const double op = child.opacity(c);
+      const Vec3 n = child.normalAt(c);
+      const bool turned = glm::dot(n, refNormal) < 0.0f;
       opSum += op;
-      nrm += op * DVec3(child.normalAt(c));
-      const DVec3 f = op * DVec3(child.axisFractionAt(c));
-      axes += f;
+      nrm += op * DVec3(turned ? -n : n);
+      axes += op * DVec3(child.axisFractionAt(c));
       if (lit) {
-        rad += op * DVec3(child.radianceAt(c));
-        for (int ax = 0; ax < 3; ++ax) radAxis[ax] += f[ax] * DVec3(child.radianceAxisAt(c, ax));
+        const DVec3 f = DVec3(decodeRgb9e5(child.radiance[c])), k = DVec3(decodeRgb9e5(child.radianceBack[c]));
+        front += op * (turned ? k : f);
+        back += op * (turned ? f : k);
       }
     }
     const double len = glm::length(nrm);
     out.keys.push_back(parents[a].first);
     out.coverage.push_back(float(opSum / 8.0));
     out.axisFraction.push_back(opSum > 0.0 ? Vec3(axes / opSum) : Vec3(0.0f));
-    out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : child.normalAt(parents[a].second));
+    out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : refNormal);
     if (lit) {
-      out.radiance.push_back(opSum > 0.0 ? Vec3(rad / opSum) : Vec3(0.0f));
-      std::array<Vec3, 3> byAxis;
-      for (int ax = 0; ax < 3; ++ax) byAxis[size_t(ax)] = axes[ax] > 0.0 ? Vec3(radAxis[ax] / axes[ax]) : out.radiance.back();
-      out.radianceAxes.push_back(byAxis);
+      out.radiance.push_back(opSum > 0.0 ? Vec3(front / opSum) : Vec3(0.0f));
+      out.radianceBack.push_back(opSum > 0.0 ? Vec3(back / opSum) : Vec3(0.0f));
     }
-    a = b;
+    a = end;
   }
   return out;
 }
@@ -307,13 +318,10 @@ struct Accum {
   DVec3 radiance{0.0};  ///< sum of filter weight * opacity * radiance
   DVec3 normal{0.0};    ///< sum of filter weight * opacity * normal
   DVec3 projected{0.0}; ///< sum of filter weight * opacity * |normal| per axis
-  DVec3 radianceAxis[3] = {DVec3(0.0), DVec3(0.0), DVec3(0.0)};  ///< sum of weight * projected[a] * radiance along a
   VoxelSample finish() const {
     VoxelSample s;
     s.opacity = float(opacity);
     s.projected = Vec3(projected);
-    for (int a = 0; a < 3; ++a)
-      s.radianceAxis[a] = projected[a] > 0.0 ? Vec3(radianceAxis[a] / projected[a]) : Vec3(0.0f);
     if (weight > 0.0) {
       s.radiance = Vec3(radiance / weight);
       s.normal = Vec3(normal / weight);
@@ -341,14 +349,14 @@ void trilinear(const Level& lv, const DVec3& origin, const Vec3& worldPos, doubl
     acc.normal += wo * DVec3(lv.normalAt(size_t(v)));
     const DVec3 proj = wo * DVec3(lv.axisFractionAt(size_t(v)));
     acc.projected += proj;
-    for (int a = 0; a < 3; ++a) acc.radianceAxis[a] += proj[a] * DVec3(lv.radianceAxisAt(size_t(v), a));
   }
 }
 
 /// The cone's part of a trilinear lookup (VoxelField::coneSample), in float and without the
 /// normals: the 8 corners' bricks are probed once each (most lookups fall in one brick).
-void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec3& absD, float& density,
-                   Vec3& radiance) {
+void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec3& d, const Vec3& localApex,
+                   float& density, Vec3& radiance) {
+  const Vec3 absD = glm::abs(d);
   const Vec3 q = localPos * lv.invVoxelSize - Vec3(0.5f);
   const Vec3 base = glm::floor(q);
   const Vec3 f = q - base;
@@ -374,14 +382,14 @@ void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec
     const uint64_t mask = lv.brickMask[size_t(b)];
     if (!((mask >> bit) & 1u)) continue;
     const size_t v = lv.brickBase[size_t(b)] + size_t(__builtin_popcountll(mask & ((uint64_t(1) << bit) - 1)));
-    // Projected area along the cone's direction, per axis, and the radiance seen along each.
+    // Projected area along the cone's direction, and the radiance of the side the apex sees
+    // (the direction from the apex, not the axis: a lookup's reach takes in surfaces beside
+    // the axis, and a ray from the apex reaches them from their apex side).
     const Vec3 proj = (w * lv.opacity(v)) * lv.axisFractionAt(v) * absD;
-    density += proj.x + proj.y + proj.z;
-    if (lv.radianceAxes.empty()) {
-      radiance += (proj.x + proj.y + proj.z) * lv.radianceAt(v);
-    } else {
-      radiance += proj.x * lv.radianceAxisAt(v, 0) + proj.y * lv.radianceAxisAt(v, 1) + proj.z * lv.radianceAxisAt(v, 2);
-    }
+    const float area = proj.x + proj.y + proj.z;
+    density += area;
+    const Vec3 centre = (Vec3(float(i), float(j), float(k)) + Vec3(0.5f)) / lv.invVoxelSize;
+    radiance += area * lv.radianceSeenAlong(v, centre - localApex);
   }
 }
 
@@ -423,10 +431,20 @@ struct VoxelField::Impl {
 
 namespace {
 
-/// Splat `photons` into `lv` (see VoxelField::inject); returns flux per voxel.
-std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& photons,
-                               float sigmaVoxels, DVec3& dropped, Progress* progress) {
-  std::vector<Vec3> flux(lv.size(), Vec3(0.0f));
+/// Flux per voxel and side (front: the side the voxel's normal points to).
+struct SidedFlux {
+  std::vector<Vec3> front, back;
+};
+
+/// The footprint spreads a photon over the surface it landed on: a voxel whose mean normal
+/// turns more than 60 degrees from the photon's belongs to another surface across a crease (a
+/// wall beside a lit floor), not to this one; a corner voxel's 45 degrees still counts.
+constexpr float kSameSurfaceCos = 0.5f;
+
+/// Splat `photons` into `lv` (see VoxelField::inject); returns flux per voxel and side.
+SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& photons, float sigmaVoxels,
+                       DVec3& dropped, Progress* progress) {
+  SidedFlux flux{std::vector<Vec3>(lv.size(), Vec3(0.0f)), std::vector<Vec3>(lv.size(), Vec3(0.0f))};
   const double radius = 3.0 * double(sigmaVoxels);
   const double inv2s2 = 1.0 / (2.0 * double(sigmaVoxels) * sigmaVoxels);
   // Photons go in fixed blocks; a wave of blocks is splatted in parallel into per-block lists,
@@ -435,6 +453,7 @@ std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const Photo
   const size_t blocks = (photons.size() + kBlock - 1) / kBlock;
   struct Splat {
     uint32_t voxel;
+    bool back;
     Vec3 flux;
   };
   std::vector<std::vector<Splat>> lists(std::min(blocks, kWave));
@@ -447,14 +466,20 @@ std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const Photo
       out.clear();
       blockDropped[wb] = DVec3(0.0);
       IndexAccessor access(*lv.tree);
-      std::vector<std::pair<uint32_t, float>> cand;
+      struct Candidate {
+        uint32_t voxel;
+        float weight;
+      };
+      // Voxels whose (wound) normal faces the photon, and those facing away from it.
+      std::vector<Candidate> cand[2];
       std::vector<double> gauss[3];
       const size_t begin = (wave + wb) * kBlock, end = std::min(photons.size(), begin + kBlock);
       for (size_t p = begin; p < end; ++p) {
         const Photon& ph = photons[p];
         const DVec3 q = (DVec3(ph.position) - origin) / lv.voxelSize;
-        cand.clear();
-        double wsum = 0.0;
+        cand[0].clear();
+        cand[1].clear();
+        double wsum[2] = {0.0, 0.0};
         int64_t lo[3], hi[3];
         for (int a = 0; a < 3; ++a) {
           lo[a] = int64_t(std::ceil(q[a] - 0.5 - radius));
@@ -473,29 +498,38 @@ std::vector<Vec3> splatPhotons(const Level& lv, const DVec3& origin, const Photo
               // Only voxels holding diffuse surface gather light.
               const uint8_t* alb = &lv.albedo[3 * size_t(v)];
               if ((alb[0] | alb[1] | alb[2]) == 0) continue;
-              // Two-sided leak guard: only voxels whose mean normal faces the photon's side.
-              if (glm::dot(decodeNormalDirection(lv.normal[size_t(v)]), ph.normal) <= 0.0f) continue;
+              // Voxels of another surface (kSameSurfaceCos) take none of the photon.
+              const Vec3 n = decodeNormalDirection(lv.normal[size_t(v)]);
+              const float cosNormals = glm::dot(n, ph.normal);
+              if (sqr(cosNormals) <= sqr(kSameSurfaceCos) * glm::dot(n, n)) continue;
               // Gaussian footprint times the surface area the voxel holds: a uniform photon
               // density then gives a uniform irradiance flux / area, where the plain Gaussian
               // would give a voxel clipped to a sliver of surface the flux of a full voxel (and
               // radiance up to 1 / sliver area).
               const double g = gauss[0][size_t(i - lo[0])] * gauss[1][size_t(j - lo[1])] * gauss[2][size_t(k - lo[2])];
               const double w = g * double(lv.coverage[size_t(v)]);
-              cand.emplace_back(uint32_t(v), float(w));
-              wsum += w;
+              const int back = cosNormals < 0.0f;
+              cand[back].push_back({uint32_t(v), float(w)});
+              wsum[back] += w;
             }
-        if (wsum > 0.0) {
-          // Normalized over the qualifying voxels: the photon's power is conserved.
-          for (const auto& [v, w] : cand) out.push_back({v, ph.power * float(double(w) / wsum)});
+        // The photon lands on the side it arrived on: the front of the voxels that face it (a
+        // closed object's far face, in the next voxel layer, stays dark inside), or, where none
+        // does, the back of those facing away (an open panel lit from behind its winding).
+        // Normalized over the chosen voxels: the photon's power is conserved.
+        const int side = wsum[0] > 0.0 ? 0 : 1;
+        if (wsum[side] > 0.0) {
+          for (const Candidate& c : cand[side])
+            out.push_back({c.voxel, side == 1, ph.power * float(double(c.weight) / wsum[side])});
           continue;
         }
         const int64_t v = lv.find(int64_t(std::floor(q.x)), int64_t(std::floor(q.y)), int64_t(std::floor(q.z)), access);
-        if (v >= 0) out.push_back({uint32_t(v), ph.power});
+        if (v >= 0)
+          out.push_back({uint32_t(v), glm::dot(decodeNormalDirection(lv.normal[size_t(v)]), ph.normal) < 0.0f, ph.power});
         else blockDropped[wb] += DVec3(ph.power);
       }
     });
     for (size_t wb = 0; wb < waveBlocks; ++wb) {
-      for (const Splat& s : lists[wb]) flux[s.voxel] += s.flux;
+      for (const Splat& s : lists[wb]) (s.back ? flux.back : flux.front)[s.voxel] += s.flux;
       dropped += blockDropped[wb];
     }
     if (progress) progress->advance(std::min(photons.size(), (wave + waveBlocks) * kBlock) - wave * kBlock);
@@ -518,7 +552,8 @@ Level keepLit(const Level& lv) {
     a.coverage.push_back(float(lv.coverage[v]));
     a.normal.push_back(lv.normalAt(v));
     a.albedo.push_back(lv.albedoAt(v));
-    a.radiance.push_back(lv.radianceAt(v));
+    a.radiance.push_back(decodeRgb9e5(lv.radiance[v]));
+    a.radianceBack.push_back(decodeRgb9e5(lv.radianceBack[v]));
   }
   Level out = makeLevel(lv.level, lv.voxelSize, a);
   out.buildSeconds = lv.buildSeconds;
@@ -529,17 +564,21 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
   if (grid.empty()) return;
   Timer timer;
   Level& lv = grid.levels.front();
-  const std::vector<Vec3> flux = splatPhotons(lv, origin, photons, settings.kernelSigmaVoxels, dropped, progress);
-  // L = albedo / pi * E, E = flux / area (area = coverage * voxelSize^2 at the finest level).
-  std::vector<Vec3> radiance(lv.size());
+  const SidedFlux flux = splatPhotons(lv, origin, photons, settings.kernelSigmaVoxels, dropped, progress);
+  // L = albedo / pi * E per side, E = flux / area (area = coverage * voxelSize^2 at the finest
+  // level: each side of a two-sided surface has all of it).
+  std::vector<Vec3> front(lv.size()), back(lv.size());
   const double voxelArea = lv.voxelSize * lv.voxelSize;
   injectedOut = DVec3(0.0);
   for (size_t v = 0; v < lv.size(); ++v) {
-    injectedOut += DVec3(flux[v]);
+    injectedOut += DVec3(flux.front[v]) + DVec3(flux.back[v]);
     const double area = double(lv.coverage[v]) * voxelArea;
-    radiance[v] = area > 0.0 ? Vec3(DVec3(lv.albedoAt(v)) * (1.0 / (3.14159265358979323846 * area)) * DVec3(flux[v])) : Vec3(0.0f);
+    if (!(area > 0.0)) continue;
+    const DVec3 k = DVec3(lv.albedoAt(v)) * (1.0 / (3.14159265358979323846 * area));
+    front[v] = Vec3(k * DVec3(flux.front[v]));
+    back[v] = Vec3(k * DVec3(flux.back[v]));
   }
-  lv.setRadiance(radiance);
+  lv.setRadiance(front, back);
   // Mips built before are stale: rebuild them from the new finest level.
   const size_t mips = grid.levels.size();
   grid.levels.resize(1);
@@ -661,7 +700,6 @@ VoxelSample VoxelField::lookup(const Vec3& worldPos, int level) const {
   VoxelSample s;
   s.opacity = lv->opacity(size_t(v));
   s.projected = s.opacity * lv->axisFractionAt(size_t(v));
-  for (int a = 0; a < 3; ++a) s.radianceAxis[a] = lv->radianceAxisAt(size_t(v), a);
   s.radiance = lv->radianceAt(size_t(v));
   s.normal = lv->normalAt(size_t(v));
   return s;
@@ -680,7 +718,7 @@ VoxelSample VoxelField::sample(const Vec3& worldPos, float level) const {
   return acc.finish();
 }
 
-ConeSample VoxelField::coneSample(const Vec3& worldPos, float level, const Vec3& absD) const {
+ConeSample VoxelField::coneSample(const Vec3& worldPos, float level, const Vec3& dir, const Vec3& apex) const {
   const Grid& g = m_impl->main;
   ConeSample out;
   if (g.empty()) return out;
@@ -689,20 +727,23 @@ ConeSample VoxelField::coneSample(const Vec3& worldPos, float level, const Vec3&
   const int l0 = int(std::floor(l));
   const float t = l - float(l0);
   const Vec3 local = worldPos - m_impl->originF;
-  coneTrilinear(*g.find(l0), local, 1.0f - t, absD, out.density, out.radiance);
-  if (t > 0.0f) coneTrilinear(*g.find(l0 + 1), local, t, absD, out.density, out.radiance);
+  const Vec3 localApex = apex - m_impl->originF;
+  coneTrilinear(*g.find(l0), local, 1.0f - t, dir, localApex, out.density, out.radiance);
+  if (t > 0.0f) coneTrilinear(*g.find(l0 + 1), local, t, dir, localApex, out.density, out.radiance);
   if (out.density > 0.0f) out.radiance /= out.density;
   return out;
 }
 
-Vec3 VoxelField::causticRadiance(const Vec3& worldPos) const {
+Vec3 VoxelField::causticRadiance(const Vec3& worldPos, const Vec3& viewFrom) const {
   const Grid& g = m_impl->caustic;
   if (g.empty()) return Vec3(0.0f);
-  Accum acc;
-  trilinear(g.levels.front(), m_impl->origin, worldPos, 1.0, acc);
-  // The opacity-weighted mean: the surface's caustic radiance, not faded by the trilinear
-  // weights of empty voxels around a surface point.
-  return acc.finish().radiance;
+  // The projected-area-weighted mean of the faces seen from viewFrom: the surface's caustic
+  // radiance on the viewer's side, not faded by the trilinear weights of empty voxels around it.
+  float density = 0.0f;
+  Vec3 radiance(0.0f);
+  const Vec3 dir = glm::normalize(worldPos - viewFrom);
+  coneTrilinear(g.levels.front(), worldPos - m_impl->originF, 1.0f, dir, viewFrom - m_impl->originF, density, radiance);
+  return density > 0.0f ? radiance / density : Vec3(0.0f);
 }
 
 Vec3 VoxelField::injectedPower() const { return Vec3(m_impl->injected); }
@@ -735,7 +776,7 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     if (!lv.axisFraction.empty()) row("axes", lv.axisFraction.capacity() * sizeof(uint8_t), 0.0);
     if (!lv.albedo.empty()) row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
     row("radiance", lv.radiance.capacity() * sizeof(uint32_t), finest ? m_impl->main.injectSeconds : 0.0);
-    if (!lv.radianceAxes.empty()) row("radiance_axes", lv.radianceAxes.capacity() * sizeof(uint32_t), 0.0);
+    if (!lv.radianceBack.empty()) row("radiance_back", lv.radianceBack.capacity() * sizeof(uint32_t), 0.0);
   }
   for (const Level& lv : m_impl->caustic.levels) {
     VoxelGridStats s;
@@ -745,7 +786,7 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     s.activeVoxels = lv.size();
     s.leaves = lv.tree ? lv.tree->leafCount() : 0;
     s.bytes = lv.topologyBytes() + lv.coverage.capacity() * sizeof(Half) + lv.normal.capacity() * sizeof(uint16_t) +
-              lv.albedo.capacity() + lv.radiance.capacity() * sizeof(uint32_t);
+              lv.albedo.capacity() + (lv.radiance.capacity() + lv.radianceBack.capacity()) * sizeof(uint32_t);
     s.seconds = lv.buildSeconds;
     rows.push_back(s);
   }

@@ -55,12 +55,11 @@ struct VoxelArrays {
   std::vector<float> coverage;
   std::vector<Vec3> normal;    ///< unit
   std::vector<Vec3> albedo;    ///< diffuse albedo, area-weighted over all the voxel's surface
-  std::vector<Vec3> radiance;  ///< W/(sr m^2); empty until injection
+  std::vector<Vec3> radiance;      ///< W/(sr m^2) of the front side; empty until injection
+  std::vector<Vec3> radianceBack;  ///< of the back side (see Level::radiance)
   /// Coarser levels only: opacity-weighted mean of |normal| per axis (what a ray along an axis
   /// sees of the surfaces); empty at the finest level, where |normal| stands in.
   std::vector<Vec3> axisFraction;
-  /// Coarser levels only: radiance seen along x, y and z (see Level::radianceAxes).
-  std::vector<std::array<Vec3, 3>> radianceAxes;
   size_t size() const { return keys.size(); }
 };
 

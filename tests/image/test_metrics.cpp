@@ -116,6 +116,11 @@ TEST(MetricsCompare, HandComputed2x2) {
   EXPECT_GT(m.ssim, -1.0);
   EXPECT_LT(m.ssim, 1.0);
   EXPECT_NEAR(m.ssim, directSsim(test, ref), 1e-12);
+  // Means: test (1.25 + 0.125 + 0.5 + 0.5) / 4 = 0.59375, reference (1 + 0 + 0.5 + 0.5) / 4 = 0.5.
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_DOUBLE_EQ(m.meanTest[c], 0.59375);
+    EXPECT_DOUBLE_EQ(m.meanReference[c], 0.5);
+  }
   // relMSE is not symmetric (it divides by the reference).
   EXPECT_NE(compareImages(ref, test).relMse, m.relMse);
 }
@@ -205,10 +210,13 @@ TEST(MetricsJson, KeysAndInfinity) {
   m.mse = 0.5;
   m.psnrSrgb8 = 31.5;
   m.ssim = 0.75;
-  EXPECT_EQ(m.toJson(), nlohmann::json::parse(R"({"relmse":0.25,"mse":0.5,"psnr_srgb8":31.5,"ssim":0.75})"));
+  m.meanTest = DVec3(0.5, 0.25, 0.125);
+  m.meanReference = DVec3(1.0, 2.0, 4.0);
+  EXPECT_EQ(m.toJson(), nlohmann::json::parse(R"({"relmse":0.25,"mse":0.5,"psnr_srgb8":31.5,"ssim":0.75,
+      "mean":[0.5,0.25,0.125],"mean_reference":[1.0,2.0,4.0]})"));
   m.psnrSrgb8 = std::numeric_limits<double>::infinity();
   EXPECT_TRUE(m.toJson()["psnr_srgb8"].is_null());
-  EXPECT_EQ(m.toJson().size(), 4u);
+  EXPECT_EQ(m.toJson().size(), 6u);
 }
 
 TEST(MetricsFalseColor, RampEndsAndScaling) {

@@ -1,7 +1,9 @@
 // The voxcone method: cone weights, furnace spheres, the thin-wall leak and its mitigation,
 // agreement with path tracing, determinism across thread counts, option errors.
 
+#include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
 #include "voxcone/integrator/cone_set.h"
 #include "voxcone/integrator/integrator.h"
 
@@ -85,18 +87,20 @@ TEST(VoxelCone, ThinWallLeakIsMeasuredAndExactSegmentsCutIt) {
   const Image hit = renderWith(scene, "voxcone", s, {{"level", 5}, {"photons", 50000}, {"gather", "hit"}}).image;
   // gather = "hit" has exact visibility everywhere but filters the radiance at the hit over the
   // cone's width, and that lookup reaches through the wall: it leaks as much as no mitigation
-  // (measured 2.3% at level 5, 2.2% at level 6). This shows the failure.
-  EXPECT_GT(imageMean(hit, 0, 15).x / imageMean(hit, 17, 32).x, 0.01f);
-  // Measured (64x32, 16 spp): 2.5% before, 0.7% after.
-  EXPECT_GT(before, 0.01f);
+  // (measured 1.04% at level 5, 0.95% at level 6, 64x32 at 16 spp). This shows the failure.
+  EXPECT_GT(imageMean(hit, 0, 15).x / imageMean(hit, 17, 32).x, 0.005f);
+  // Measured (64x32, 16 spp): 1.04% before, 0.34% after at level 5 (here, 32x16 at 4 spp:
+  // about 0.97% and 0.3%). Each voxel keeps the two sides of the wall apart; what is left
+  // comes from coarse voxels that mix both rooms' walls.
+  EXPECT_GT(before, 0.005f);
   EXPECT_LT(after, 0.5f * before);
-  EXPECT_LT(after, 0.01f);
+  EXPECT_LT(after, 0.005f);
 }
 
 TEST(VoxelCone, CornellBoxMeanMatchesPath) {
-  // The cones' linear occlusion overweights surfaces near a wide cone's rim (over-occlusion:
-  // indirect light on the walls comes out about a third too high), so the image mean sits
-  // above path tracing: measured +6.3%, +6.9%, +4.9% (r, g, b); this bounds it at 8%.
+  // Measured +1.5%, +2.5%, +1.3% (r, g, b) at this size and level (-0.8%, +0.2%, -0.8% at
+  // 256x256, level 7); this bounds it at 5%. Before the voxels kept the two sides of each
+  // surface apart and the march followed the cone's own axis it was +6.3%, +6.9%, +4.9%.
   const Scene scene = cornellBox();
   RenderSettings s = scene.render;
   s.width = s.height = 32;
@@ -104,7 +108,68 @@ TEST(VoxelCone, CornellBoxMeanMatchesPath) {
   const Vec3 ref = imageMean(renderWith(scene, "path", s).image);
   s.spp = 16;
   const Vec3 vc = imageMean(renderWith(scene, "voxcone", s, {{"photons", 100000}, {"level", 6}}).image);
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(vc[c], ref[c], 0.08 * ref[c]) << "channel " << c;
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(vc[c], ref[c], 0.05 * ref[c]) << "channel " << c;
+}
+
+/// A lit floor (4 x 4, albedo 0.8) and a square occluder (1 x 1, albedo 0.8) 0.5 above its
+/// centre, under a point light 2 above the floor: the occluder's shadow on the floor
+/// (|x|, |z| < 2/3) has no direct light, only what the occluder's underside reflects of the lit
+/// floor (two bounces and more).
+Scene litPlaneWithOccluder() {
+  return parseScene(R"({
+    "camera": {"position": [0, 3, -4], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40},
+    "render": {"width": 8, "height": 8, "spp": 1, "max_depth": 16},
+    "materials": {"white": {"type": "lambertian", "albedo": 0.8}},
+    "shapes": [
+      {"type": "quad", "material": "white", "vertices": [[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]]},
+      {"type": "quad", "material": "white",
+       "vertices": [[-0.5, 0.5, -0.5], [0.5, 0.5, -0.5], [0.5, 0.5, 0.5], [-0.5, 0.5, 0.5]]}],
+    "lights": [{"type": "point", "position": [0, 2, 0], "intensity": 10}]
+  })", "lit-plane", ".");
+}
+
+/// Mean radiance `method` gives over `samples` rays straight down onto the floor at (x, 0, z),
+/// from under the occluder.
+Vec3 floorRadiance(const Scene& scene, const std::string& method, const nlohmann::json& options, float x, float z,
+                   int samples) {
+  const Hbvh accel(scene);
+  IntegratorContext ctx{scene, accel, scene.render, options};
+  auto integrator = createIntegrator(method, ctx);
+  integrator->prepare(nullptr);
+  DVec3 sum(0.0);
+  for (int i = 0; i < samples; ++i) {
+    Rng rng(7, uint64_t(i));
+    sum += DVec3(integrator->li(Ray{Vec3(x, 0.25f, z), Vec3(0.0f, -1.0f, 0.0f)}, rng));
+  }
+  return Vec3(sum / double(samples));
+}
+
+TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
+  // In the shadow every bit of light is indirect; path tracing with 200k paths per point is
+  // the converged value (its standard error is under 0.5%). The field itself is within 5% of
+  // path on the occluder's underside at level 6; the cones add their own error.
+  const Scene scene = litPlaneWithOccluder();
+  for (const Vec2 at : {Vec2(0.0f, 0.0f), Vec2(0.4f, 0.3f)}) {
+    const float ref = floorRadiance(scene, "path", nlohmann::json::object(), at.x, at.y, 200000).x;
+    ASSERT_GT(ref, 0.0f);
+    auto ratio = [&](nlohmann::json options) {
+      options.update({{"photons", 200000}, {"level", 6}});
+      const float vc = floorRadiance(scene, "voxcone", options, at.x, at.y, 256).x;
+      return vc / ref;
+    };
+    // The default (6 marched cones): measured +15.8% / +15.4% at the two points. Besides the
+    // field's own +5%, lookups beside the occluder's edge count part of it for axes that just
+    // miss it, while axes that just hit it count it whole (the exact segment). It was +33%
+    // before the march followed the cone's own axis, and +1000% when the occluder's voxels
+    // mixed its lit top into its underside.
+    EXPECT_NEAR(ratio({}), 1.0f, 0.2f);
+    // gather = hit with narrow cones is close; with the 6 default cones it fails: a cone whose
+    // axis misses the occluder counts none of it (and one that hits counts all), and its
+    // lookup at the cone's width mixes the underside with the floor: measured -45% / -54%;
+    // narrow cones +5.5% / +5.2%.
+    EXPECT_NEAR(ratio({{"gather", "hit"}, {"cones", 64}}), 1.0f, 0.1f);
+    EXPECT_LT(ratio({{"gather", "hit"}}), 0.7f);
+  }
 }
 
 TEST(VoxelCone, SameImageAtOneAndTwoThreads) {

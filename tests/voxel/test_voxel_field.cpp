@@ -406,7 +406,7 @@ TEST(VoxelField, CausticGrid) {
   // points spread over the interior has ~1.1% std: allow 3%.
   double sum = 0.0;
   for (int a = 0; a < 10; ++a)
-    for (int b = 0; b < 10; ++b) sum += field.causticRadiance(Vec3(0.1f + 0.08f * a, 0.1f + 0.08f * b, 0.0f)).x;
+    for (int b = 0; b < 10; ++b) sum += field.causticRadiance(Vec3(0.1f + 0.08f * a, 0.1f + 0.08f * b, 0.0f), Vec3(0.1f + 0.08f * a, 0.1f + 0.08f * b, 0.1f)).x;
   EXPECT_NEAR(sum / 100.0, 0.6 / M_PI, 0.03 * 0.6 / M_PI);
   // The main grid holds all diffuse radiance, caustic photons included.
   EXPECT_NEAR(field.injectedPower().x, 1.0, 1e-4);

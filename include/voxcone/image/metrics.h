@@ -22,6 +22,9 @@ struct ImageMetrics {
   /// every window position inside the image, on the Rec. 709 luma of the 8-bit sRGB codes
   /// (weights applied to code values). Images under 11 pixels on an axis use min(11, size) taps.
   double ssim = 0.0;
+  /// Mean of the test and of the reference image, linear, per channel (their ratio is the
+  /// bias of a method whose noise averages out).
+  DVec3 meanTest{0.0}, meanReference{0.0};
   nlohmann::json toJson() const;
 };
 

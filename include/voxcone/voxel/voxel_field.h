@@ -34,7 +34,7 @@ struct VoxelSettings {
 
 /// Memory and time of one grid at one level.
 struct VoxelGridStats {
-  std::string grid;          ///< "opacity", "normal", "axes", "radiance_axes" (mips), "albedo", "radiance", "caustic", "topology"
+  std::string grid;          ///< "opacity", "normal", "axes" (mips), "albedo", "radiance", "radiance_back", "albedo", "radiance", "caustic", "topology"
   int level = 0;
   double voxelSize = 0.0;    ///< world units
   uint64_t activeVoxels = 0;
@@ -46,17 +46,13 @@ struct VoxelGridStats {
 /// One voxel looked up at a (possibly fractional) level.
 struct VoxelSample {
   float opacity = 0.0f;      ///< coverage in [0, 1]
-  Vec3 radiance{0.0f};       ///< outgoing diffuse radiance (opacity-weighted mean), W/(sr m^2)
+  Vec3 radiance{0.0f};       ///< outgoing diffuse radiance, both sides summed (opacity-weighted mean), W/(sr m^2)
   Vec3 normal{0.0f};         ///< mean normal (not normalized: its length says how aligned)
   /// opacity times the mean |normal| per axis. A ray of unit direction d crossing the field
   /// meets surfaces at the rate dot(projected, |d|) / finest voxel size per unit length (the
   /// area density times the projected fraction, summed as if the axes' signs agreed): a plane
   /// crossed at any angle adds up to one crossing, at every level.
   Vec3 projected{0.0f};
-  /// Radiance seen along the x, y and z axes: the voxels' radiance weighted by their
-  /// surfaces' projected area along that axis (a face seen edge-on adds nothing). A cone along
-  /// d sees sum_a |d_a| projected_a radianceAxis[a] / sum_a |d_a| projected_a.
-  Vec3 radianceAxis[3] = {Vec3(0.0f), Vec3(0.0f), Vec3(0.0f)};
 };
 
 /// What a cone of unit direction d takes from one lookup: VoxelSample reduced to the two
@@ -64,8 +60,9 @@ struct VoxelSample {
 struct ConeSample {
   /// dot(projected, |d|): surfaces met per finest voxel size of travel along d.
   float density = 0.0f;
-  /// Radiance the cone sees: sum_a |d_a| projected_a radianceAxis[a] / density; zero when
-  /// density is zero.
+  /// Radiance the cone sees: per voxel the side of its surface that faces the cone's apex
+  /// (surfaces are two-sided and each side keeps its own light), weighted by the voxel's share
+  /// of the density. Zero when density is zero.
   Vec3 radiance{0.0f};
 };
 
@@ -88,17 +85,22 @@ public:
   /// photons go to the main grid too (it holds all diffuse radiance: the global map covers
   /// every light path but L S+ D, the caustic map those) and to the caustic grid when
   /// settings.causticLevel > 0. Identical at any thread count.
-  /// The footprint covers the active voxels within 3 sigma whose mean normal faces the photon's
-  /// normal (dot > 0: light on one side of a two-sided wall stays on that side) and that hold
-  /// diffuse albedo; weights exp(-d^2 / 2 sigma^2) times the voxel's surface area, normalized
-  /// to one. Without such a voxel the photon goes to the voxel containing it, else it is
-  /// dropped (droppedPower()). Replaces earlier injections; rebuilds mips already built.
+  /// Each voxel keeps the two sides of its surface apart (front: the side its wound mean
+  /// normal points to): a panel lit from above stays dark below. The footprint covers the
+  /// active voxels within 3 sigma that hold diffuse albedo and whose mean normal lies within 60
+  /// degrees of the photon's normal (the same surface, not another across a crease), on their
+  /// front; where there is none, those within 60 degrees of its opposite, on their back (an
+  /// open panel lit from behind its winding). Weights exp(-d^2 / 2 sigma^2) times the voxel's
+  /// surface area, normalized to one. Without such a voxel the photon goes to the voxel
+  /// containing it, on the side it arrived on, else it is dropped (droppedPower()). Replaces
+  /// earlier injections; rebuilds mips already built.
   void inject(const PhotonMaps& photons, Progress* progress = nullptr);
 
   /// Build levels level-1 ... coarsestLevel by 2x2x2 box restriction: opacity = mean coverage
-  /// of the 8 children, radiance = opacity-weighted mean, normal = opacity-weighted sum
-  /// (renormalized), opacity-weighted mean |normal| per axis (for VoxelSample::projected) and
-  /// the radiance seen along each axis (VoxelSample::radianceAxis).
+  /// of the 8 children; each child turned to agree with the most opaque one (two-sided
+  /// surfaces: front and back swap when turned), then normal = opacity-weighted sum
+  /// (renormalized), front and back radiance = opacity-weighted means, opacity-weighted mean
+  /// |normal| per axis (for VoxelSample::projected).
   /// Albedo stays at the finest level only (nothing gathers it from mips).
   void buildMips(Progress* progress = nullptr);
 
@@ -114,10 +116,13 @@ public:
   VoxelSample lookup(const Vec3& worldPos, int level) const;
   /// Trilinear at an integer level, linear between levels for fractional `level` (what cones use).
   VoxelSample sample(const Vec3& worldPos, float level) const;
-  /// sample(worldPos, level) as a cone of direction d (absD = |d|) sees it (the cones' hot path).
-  ConeSample coneSample(const Vec3& worldPos, float level, const Vec3& absD) const;
+  /// sample(worldPos, level) as a cone of unit direction `dir` from `apex` sees it (the cones'
+  /// hot path): each voxel shows the side of its surface that faces the apex.
+  ConeSample coneSample(const Vec3& worldPos, float level, const Vec3& dir, const Vec3& apex) const;
   /// Caustic radiance at worldPos (trilinear in the caustic grid); zero without one.
-  Vec3 causticRadiance(const Vec3& worldPos) const;
+  /// `viewFrom`: a point on the viewer's side of the surface, more than a caustic voxel away
+  /// (the caustic light of the surface's other side stays there).
+  Vec3 causticRadiance(const Vec3& worldPos, const Vec3& viewFrom) const;
 
   /// Totals used by tests: sum over the finest level of radiance * pi / albedo * area (the
   /// injected flux), per channel.
