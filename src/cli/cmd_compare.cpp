@@ -29,6 +29,7 @@ struct CompareArgs {
   double thresholdRelMse = 0.0;
   double thresholdPsnrDb = 0.0;
   std::string errorImagePath;
+  double errorScale = 0.0;
   bool json = false;
   CLI::Option* thresholdRelMseOpt = nullptr;
   CLI::Option* thresholdPsnrOpt = nullptr;
@@ -60,10 +61,11 @@ void runCompare(const CompareArgs& args) {
   const ImageMetrics m = compareImages(test, ref);
 
   if (!args.errorImagePath.empty()) {
-    const nlohmann::json meta = {{"error_map", "per-pixel relative squared error, inferno ramp, 99th percentile scale"},
+    const std::string scale = args.errorScale > 0.0 ? "scale " + format("%.6g", args.errorScale) : "99th percentile scale";
+    const nlohmann::json meta = {{"error_map", "per-pixel relative squared error, inferno ramp, " + scale},
                                  {"test", args.testPath},
                                  {"reference", args.refPath}};
-    writeImage(args.errorImagePath, falseColorError(test, ref), meta);
+    writeImage(args.errorImagePath, falseColorError(test, ref, args.errorScale), meta);
   }
 
   if (args.json) {
@@ -111,6 +113,11 @@ void addCompareCommand(CLI::App& app) {
   sub->add_option("--error-image", args->errorImagePath,
                   "Write a false-colour map of the relative squared error (.png or .exr)")
       ->type_name("PATH");
+  sub->add_option("--error-scale", args->errorScale,
+                  "Relative squared error at the top of the error image's ramp (default: its 99th percentile); "
+                  "give two images the same scale to compare them")
+      ->check(CLI::PositiveNumber)
+      ->type_name("X");
   sub->add_flag("--json", args->json, "Print the metrics as one JSON object instead of the table");
   sub->callback([args]() { runCompare(*args); });
 }

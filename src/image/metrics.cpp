@@ -126,6 +126,20 @@ double pixelRelError(const Vec3& t, const Vec3& r) {
   return e / 3.0;
 }
 
+/// 99th percentile (nearest rank) of the finite values of `err`; 0 when there are none.
+double percentile99(const std::vector<double>& err) {
+  std::vector<double> finite;
+  finite.reserve(err.size());
+  for (double e : err)
+    if (std::isfinite(e)) finite.push_back(e);
+  if (finite.empty()) return 0.0;
+  const size_t rank = static_cast<size_t>(std::ceil(0.99 * double(finite.size())));
+  const size_t k = std::min(finite.size() - 1, rank > 0 ? rank - 1 : 0);
+  std::nth_element(finite.begin(), finite.begin() + static_cast<std::ptrdiff_t>(k), finite.end());
+  const double p = finite[k];
+  return p > 0.0 ? p : *std::max_element(finite.begin(), finite.end());
+}
+
 /// Matplotlib's "inferno" ramp (van der Walt and Smith 2015) sampled at 10 evenly spaced points,
 /// as sRGB-encoded 8-bit codes: perceptually ordered, monotonic in lightness.
 constexpr std::array<std::array<uint8_t, 3>, 10> kInferno = {{{0x00, 0x00, 0x04},
@@ -162,6 +176,7 @@ nlohmann::json ImageMetrics::toJson() const {
   const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return nlohmann::json{{"relmse", number(relMse)}, {"mse", number(mse)}, {"psnr_srgb8", number(psnrSrgb8)},
                         {"ssim", number(ssim)},
+                        {"relerr_p99", number(relErrorP99)},
                         {"mean", {number(meanTest.x), number(meanTest.y), number(meanTest.z)}},
                         {"mean_reference", {number(meanReference.x), number(meanReference.y), number(meanReference.z)}}};
 }
@@ -173,11 +188,13 @@ ImageMetrics compareImages(const Image& test, const Image& reference) {
 
   // relMSE and MSE over linear values; sum of squared 8-bit code differences for PSNR.
   double relSum = 0.0;
+  std::vector<double> pixelErr(n);
   double sqSum = 0.0;
   uint64_t sq8Sum = 0;
   for (size_t i = 0; i < n; ++i) {
     const Vec3& t = test.pixels[i];
     const Vec3& r = reference.pixels[i];
+    pixelErr[i] = pixelRelError(t, r);
     for (int c = 0; c < 3; ++c) {
       const double d = double(t[c]) - double(r[c]);
       m.meanTest[c] += double(t[c]);
@@ -192,6 +209,7 @@ ImageMetrics compareImages(const Image& test, const Image& reference) {
   const double count = 3.0 * double(n);
   m.relMse = relSum / count;
   m.mse = sqSum / count;
+  m.relErrorP99 = percentile99(pixelErr);
   m.meanTest /= double(n);
   m.meanReference /= double(n);
   const double mse8 = double(sq8Sum) / count;
@@ -211,18 +229,7 @@ Image falseColorError(const Image& test, const Image& reference, double maxError
   // that a few fireflies do not flatten the rest of the map.
   double scale = maxError;
   if (!(scale > 0.0) || !std::isfinite(scale)) {
-    std::vector<double> finite;
-    finite.reserve(n);
-    for (double e : err)
-      if (std::isfinite(e)) finite.push_back(e);
-    scale = 0.0;
-    if (!finite.empty()) {
-      const size_t rank = static_cast<size_t>(std::ceil(0.99 * double(finite.size())));
-      const size_t k = std::min(finite.size() - 1, rank > 0 ? rank - 1 : 0);
-      std::nth_element(finite.begin(), finite.begin() + static_cast<std::ptrdiff_t>(k), finite.end());
-      scale = finite[k];
-      if (!(scale > 0.0)) scale = *std::max_element(finite.begin(), finite.end());
-    }
+    scale = percentile99(err);
     // Identical images: everything maps to the bottom of the ramp.
     if (!(scale > 0.0)) scale = 1.0;
   }

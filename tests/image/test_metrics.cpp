@@ -116,6 +116,9 @@ TEST(MetricsCompare, HandComputed2x2) {
   EXPECT_GT(m.ssim, -1.0);
   EXPECT_LT(m.ssim, 1.0);
   EXPECT_NEAR(m.ssim, directSsim(test, ref), 1e-12);
+  // Per-pixel errors 0.0625 / 1.01, 0.015625 / 0.01, 0, 0: the 99th percentile (rank 4 of 4) is
+  // the largest, 1.5625.
+  EXPECT_DOUBLE_EQ(m.relErrorP99, 1.5625);
   // Means: test (1.25 + 0.125 + 0.5 + 0.5) / 4 = 0.59375, reference (1 + 0 + 0.5 + 0.5) / 4 = 0.5.
   for (int c = 0; c < 3; ++c) {
     EXPECT_DOUBLE_EQ(m.meanTest[c], 0.59375);
@@ -210,13 +213,14 @@ TEST(MetricsJson, KeysAndInfinity) {
   m.mse = 0.5;
   m.psnrSrgb8 = 31.5;
   m.ssim = 0.75;
+  m.relErrorP99 = 2.0;
   m.meanTest = DVec3(0.5, 0.25, 0.125);
   m.meanReference = DVec3(1.0, 2.0, 4.0);
-  EXPECT_EQ(m.toJson(), nlohmann::json::parse(R"({"relmse":0.25,"mse":0.5,"psnr_srgb8":31.5,"ssim":0.75,
+  EXPECT_EQ(m.toJson(), nlohmann::json::parse(R"({"relmse":0.25,"mse":0.5,"psnr_srgb8":31.5,"ssim":0.75,"relerr_p99":2.0,
       "mean":[0.5,0.25,0.125],"mean_reference":[1.0,2.0,4.0]})"));
   m.psnrSrgb8 = std::numeric_limits<double>::infinity();
   EXPECT_TRUE(m.toJson()["psnr_srgb8"].is_null());
-  EXPECT_EQ(m.toJson().size(), 6u);
+  EXPECT_EQ(m.toJson().size(), 7u);
 }
 
 TEST(MetricsFalseColor, RampEndsAndScaling) {
@@ -286,6 +290,15 @@ TEST(MetricsCli, CompareExitCodesAndJson) {
   const nlohmann::json j = nlohmann::json::parse(std::ifstream((dir / "out.txt").string()));
   EXPECT_NEAR(j["relmse"].get<double>(), 3 * 0.0625 / 0.26 / 192.0, 1e-12);
   EXPECT_EQ(readImage((dir / "err.png").string()).width, 8);
+  // One pixel differs: the 99th percentile scale puts it at the top of the ramp; a scale twice
+  // its error puts it half way, as falseColorError with that maximum does.
+  const double e = 0.0625 / 0.26;
+  EXPECT_EQ(run(test + " " + ref + " --error-scale " + std::to_string(2.0 * e) + " --error-image " + (dir / "half.exr").string()), 0);
+  const Image half = readImage((dir / "half.exr").string());
+  EXPECT_NEAR(glm::length(half.at(3, 3) - falseColorError(testIm, refIm, 2.0 * e).at(3, 3)), 0.0f, 1e-6f);
+  EXPECT_GT(glm::length(half.at(3, 3) - falseColorError(testIm, refIm).at(3, 3)), 0.05f);
+  EXPECT_NE(run(test + " " + ref + " --error-scale 0 --error-image " + (dir / "bad.png").string()), 0);
+  EXPECT_FALSE(fs::exists(dir / "bad.png"));
   fs::remove_all(dir);
 }
 #endif

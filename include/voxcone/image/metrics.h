@@ -22,6 +22,9 @@ struct ImageMetrics {
   /// every window position inside the image, on the Rec. 709 luma of the 8-bit sRGB codes
   /// (weights applied to code values). Images under 11 pixels on an axis use min(11, size) taps.
   double ssim = 0.0;
+  /// 99th percentile (nearest rank) of the per-pixel relative squared error (mean over channels
+  /// of (t - r)^2 / (r^2 + eps)): the top of falseColorError's default scale.
+  double relErrorP99 = 0.0;
   /// Mean of the test and of the reference image, linear, per channel (their ratio is the
   /// bias of a method whose noise averages out).
   DVec3 meanTest{0.0}, meanReference{0.0};
