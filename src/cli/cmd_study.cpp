@@ -2,6 +2,7 @@
 // that each row's peak RSS is its own), collect one row per level into CSV and JSON, and draw
 // the chart with tools/plot_memory.py.
 
+#include "cli_util.h"
 #include "commands.h"
 #include "voxcone/core/error.h"
 #include "voxcone/image/image_io.h"
@@ -31,31 +32,6 @@ struct StudyOptions {
   bool noChart = false;
   std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_memory.py";
 };
-
-/// Quote for /bin/sh.
-std::string shellQuote(const std::string& s) {
-  std::string r = "'";
-  for (char c : s) r += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return r + "'";
-}
-
-/// Run a command, capture stdout; returns the exit status (-1 if it did not exit normally).
-int runCapture(const std::string& cmd, std::string& out) {
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) throw Error("cannot run: " + cmd);
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  const int status = ::pclose(p);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string selfExe() {
-  std::error_code ec;
-  const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
-  if (ec) throw Error("cannot locate the voxcone executable");
-  return p.string();
-}
 
 void runStudyMemory(const StudyOptions& o) {
   static const std::regex re("^([0-9]{1,2})\\.\\.([0-9]{1,2})$");

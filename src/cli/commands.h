@@ -10,5 +10,6 @@ void addCompareCommand(CLI::App& app);
 void addInfoCommand(CLI::App& app);
 void addVoxelizeCommand(CLI::App& app);
 void addStudyCommand(CLI::App& app);
+void addBatchCommand(CLI::App& app);
 
 }  // namespace voxcone

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   voxcone::addInfoCommand(app);
   voxcone::addVoxelizeCommand(app);
   voxcone::addStudyCommand(app);
+  voxcone::addBatchCommand(app);
   voxcone::installInterruptHandler();
   try {
     app.parse(argc, argv);

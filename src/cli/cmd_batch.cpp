@@ -1,0 +1,447 @@
+// `voxcone batch MANIFEST.json`: many renders from one manifest (a list of jobs and grids of
+// settings expanded into jobs), run in parallel with TBB, each job a `voxcone render` child
+// process (its own peak RSS, its own memory budget, a crash or an out-of-memory that stays its
+// own), with a results table (CSV and JSON) of times, memory and errors against references.
+
+#include "cli_util.h"
+#include "commands.h"
+#include "voxcone/core/error.h"
+#include "voxcone/core/progress.h"
+#include "voxcone/image/image_io.h"
+#include "voxcone/image/metrics.h"
+
+#include <nlohmann/json.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <regex>
+#include <set>
+#include <sstream>
+
+namespace voxcone {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct BatchOptions {
+  std::string manifestPath;
+  std::string outDir;
+  int jobsInFlight = 1;
+  int threadsPerJob = 0;
+  bool skipExisting = false;
+  std::string shard;
+  double memoryBudgetMb = 0.0;
+  bool dryRun = false;
+  bool quiet = false;
+};
+
+/// Keys a job (or a grid entry, or the defaults) may set.
+const std::set<std::string> kJobKeys = {"name", "scene", "method", "spp", "res", "seed", "max_depth", "options", "reference"};
+
+/// One render of the batch.
+struct Job {
+  std::string name;
+  nlohmann::json spec;  ///< scene, method, spp, res, seed, max_depth, options, reference (as resolved)
+};
+
+/// What a job gave.
+struct JobResult {
+  std::string status;  ///< "ok", "existing" (skipped: its outputs were there), "failed", "not run"
+  std::string error;
+  nlohmann::json sidecar;
+  nlohmann::json metrics;
+};
+
+void checkKeys(const nlohmann::json& obj, const std::set<std::string>& allowed, const std::string& where) {
+  if (!obj.is_object()) throw SettingsError(where + ": expected an object");
+  for (const auto& [key, value] : obj.items())
+    if (!allowed.count(key)) throw SettingsError(where + "." + key + ": unknown key");
+}
+
+/// A path from the manifest, relative to the manifest's folder.
+std::string resolvePath(const fs::path& base, const std::string& p) {
+  return fs::path(p).is_absolute() ? p : (base / p).lexically_normal().string();
+}
+
+/// 64-bit FNV-1a (the name's hash: the same spec gives the same name on every machine).
+uint64_t fnv1a(const std::string& s) {
+  uint64_t h = 1469598103934665603ULL;
+  for (unsigned char c : s) h = (h ^ c) * 1099511628211ULL;
+  return h;
+}
+
+/// `v` as a file-name fragment: letters, digits, '.', '-'; anything else becomes '-'.
+std::string slug(const nlohmann::json& v) {
+  std::string s = v.is_string() ? v.get<std::string>() : v.dump();
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-') c = '-';
+  return s;
+}
+
+/// The job's deterministic output name: scene, method, spp and every option, then a hash of the
+/// whole spec (resolution, seed, reference... and values a slug cannot tell apart).
+std::string jobName(const nlohmann::json& spec) {
+  std::string name = fs::path(spec["scene"].get<std::string>()).stem().string();
+  if (spec.contains("method")) name += "_" + slug(spec["method"]);
+  if (spec.contains("spp")) name += "_spp" + slug(spec["spp"]);
+  for (const auto& [key, value] : spec["options"].items()) name += "_" + slug(key) + slug(value);
+  if (name.size() > 120) name.resize(120);
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%08llx", static_cast<unsigned long long>(fnv1a(spec.dump()) & 0xffffffffULL));
+  return name + "_" + hash;
+}
+
+/// Fill `spec` from `src` (already key-checked), paths resolved against the manifest folder.
+void applySpec(nlohmann::json& spec, const nlohmann::json& src, const fs::path& base, const std::string& where) {
+  for (const auto& [key, value] : src.items()) {
+    if (key == "name") continue;
+    if (key == "options") {
+      if (!value.is_object()) throw SettingsError(where + ".options: expected an object");
+      for (const auto& [k, v] : value.items()) spec["options"][k] = v;
+    } else if (key == "scene" || key == "reference") {
+      if (!value.is_string()) throw SettingsError(where + "." + key + ": expected a path");
+      spec[key] = resolvePath(base, value.get<std::string>());
+    } else {
+      spec[key] = value;
+    }
+  }
+}
+
+/// Check the types of a finished spec.
+void validateSpec(const nlohmann::json& spec, const std::string& where) {
+  if (!spec.contains("scene")) throw SettingsError(where + ": no scene (give one in the job or in defaults)");
+  auto isInt = [&](const char* k) { return !spec.contains(k) || spec[k].is_number_integer(); };
+  if (!isInt("spp") || !isInt("seed") || !isInt("max_depth"))
+    throw SettingsError(where + ": spp, seed and max_depth must be integers");
+  if (spec.contains("method") && !spec["method"].is_string()) throw SettingsError(where + ".method: expected a string");
+  if (spec.contains("res") && !spec["res"].is_string()) throw SettingsError(where + ".res: expected WIDTHxHEIGHT");
+}
+
+/// The manifest's jobs, in order: "jobs" first, then each "grid" entry expanded (every array
+/// value, top level or in options, is an axis; axes in key order, options' at "options", the
+/// last varying fastest).
+std::vector<Job> expandManifest(const nlohmann::json& m, const fs::path& base) {
+  checkKeys(m, {"output_dir", "reference", "defaults", "jobs", "grid"}, "manifest");
+  nlohmann::json defaults = {{"options", nlohmann::json::object()}};
+  if (m.contains("reference")) applySpec(defaults, {{"reference", m["reference"]}}, base, "manifest");
+  if (m.contains("defaults")) {
+    checkKeys(m["defaults"], kJobKeys, "defaults");
+    if (m["defaults"].contains("name")) throw SettingsError("defaults.name: a name belongs to one job");
+    applySpec(defaults, m["defaults"], base, "defaults");
+  }
+  std::vector<Job> jobs;
+  auto add = [&](const nlohmann::json& src, const std::string& where) {
+    nlohmann::json spec = defaults;
+    applySpec(spec, src, base, where);
+    validateSpec(spec, where);
+    Job job;
+    job.spec = spec;
+    if (src.contains("name")) {
+      if (!src["name"].is_string() || !std::regex_match(src["name"].get<std::string>(), std::regex("^[A-Za-z0-9._-]{1,160}$")))
+        throw SettingsError(where + ".name: letters, digits, '.', '_' and '-' only");
+      job.name = src["name"].get<std::string>();
+    } else {
+      job.name = jobName(spec);
+    }
+    jobs.push_back(job);
+  };
+  if (m.contains("jobs")) {
+    if (!m["jobs"].is_array()) throw SettingsError("jobs: expected an array");
+    for (size_t i = 0; i < m["jobs"].size(); ++i) {
+      const std::string where = "jobs[" + std::to_string(i) + "]";
+      checkKeys(m["jobs"][i], kJobKeys, where);
+      add(m["jobs"][i], where);
+    }
+  }
+  if (m.contains("grid")) {
+    const nlohmann::json grids = m["grid"].is_array() ? m["grid"] : nlohmann::json::array({m["grid"]});
+    for (size_t g = 0; g < grids.size(); ++g) {
+      const std::string where = "grid[" + std::to_string(g) + "]";
+      checkKeys(grids[g], kJobKeys, where);
+      if (grids[g].contains("name")) throw SettingsError(where + ".name: grid jobs are named from their settings");
+      // Axes: (key, option key or "", values).
+      struct Axis {
+        std::string key, option;
+        nlohmann::json values;
+      };
+      std::vector<Axis> axes;
+      for (const auto& [key, value] : grids[g].items()) {
+        if (key == "options" && value.is_object()) {
+          for (const auto& [k, v] : value.items())
+            if (v.is_array()) axes.push_back({key, k, v});
+        } else if (value.is_array()) {
+          axes.push_back({key, "", value});
+        }
+      }
+      for (const Axis& a : axes)
+        if (a.values.empty()) throw SettingsError(where + "." + a.key + (a.option.empty() ? "" : "." + a.option) + ": empty axis");
+      std::vector<size_t> index(axes.size(), 0);
+      while (true) {
+        nlohmann::json src = grids[g];
+        for (size_t a = 0; a < axes.size(); ++a) {
+          if (axes[a].option.empty()) src[axes[a].key] = axes[a].values[index[a]];
+          else src["options"][axes[a].option] = axes[a].values[index[a]];
+        }
+        add(src, where);
+        size_t a = axes.size();
+        while (a > 0 && ++index[a - 1] == axes[a - 1].values.size()) index[--a] = 0;
+        if (a == 0) break;
+      }
+    }
+  }
+  std::set<std::string> names;
+  for (const Job& j : jobs)
+    if (!names.insert(j.name).second) throw SettingsError("two jobs are named " + j.name + " (the same settings twice?)");
+  return jobs;
+}
+
+/// Parse "I/N" (0 <= I < N).
+std::pair<size_t, size_t> parseShard(const std::string& s) {
+  static const std::regex re("^([0-9]{1,6})/([0-9]{1,6})$");
+  std::smatch m;
+  if (!std::regex_match(s, m, re)) throw SettingsError("--shard expects I/N (e.g. 0/4), got '" + s + "'");
+  const size_t i = std::stoul(m[1]), n = std::stoul(m[2]);
+  if (n == 0 || i >= n) throw SettingsError("--shard I/N needs 0 <= I < N, got '" + s + "'");
+  return {i, n};
+}
+
+/// The last non-empty line of `s`, without the CLI's "voxcone: error: " prefix.
+std::string lastLine(const std::string& s) {
+  std::istringstream in(s);
+  std::string line, last;
+  while (std::getline(in, line))
+    if (!line.empty()) last = line;
+  const std::string prefix = "voxcone: error: ";
+  if (last.rfind(prefix, 0) == 0) last = last.substr(prefix.size());
+  return last;
+}
+
+/// Run `job` as a child `voxcone render` writing outDir/<name>.{exr,png,json}.
+JobResult runJob(const Job& job, const fs::path& outDir, const BatchOptions& o) {
+  const nlohmann::json& s = job.spec;
+  std::string cmd;
+  if (o.memoryBudgetMb > 0.0)  // the data segment and private writable mappings: the heap
+    cmd += "ulimit -d " + std::to_string(static_cast<long long>(o.memoryBudgetMb * 1024.0)) + " && ";
+  cmd += "exec " + shellQuote(selfExe()) + " render " + shellQuote(s["scene"].get<std::string>()) + " -q -o " +
+         shellQuote((outDir / job.name).string()) + " -t " + std::to_string(o.threadsPerJob) + " --options " +
+         shellQuote(s["options"].dump());
+  if (s.contains("method")) cmd += " --method " + shellQuote(s["method"].get<std::string>());
+  if (s.contains("spp")) cmd += " --spp " + std::to_string(s["spp"].get<int64_t>());
+  if (s.contains("res")) cmd += " --res " + shellQuote(s["res"].get<std::string>());
+  if (s.contains("seed")) cmd += " --seed " + std::to_string(s["seed"].get<int64_t>());
+  if (s.contains("max_depth")) cmd += " --max-depth " + std::to_string(s["max_depth"].get<int64_t>());
+  cmd += " 2>&1";
+  std::string out;
+  const int code = runCapture(cmd, out);
+  JobResult r;
+  if (code != 0) {
+    r.status = "failed";
+    r.error = lastLine(out);
+    if (r.error.empty()) r.error = "exit status " + std::to_string(code);
+    if (o.memoryBudgetMb > 0.0 && r.error.find("out of memory") != std::string::npos)
+      r.error += " (memory budget " + std::to_string(static_cast<long long>(o.memoryBudgetMb)) + " MB)";
+    return r;
+  }
+  r.status = "ok";
+  return r;
+}
+
+/// Image metrics of outDir/<name>.exr against the job's reference (cached per reference path).
+nlohmann::json jobMetrics(const Job& job, const fs::path& outDir, std::map<std::string, Image>& refs,
+                          std::mutex& refsMutex) {
+  if (!job.spec.contains("reference")) return nullptr;
+  const std::string refPath = job.spec["reference"].get<std::string>();
+  try {
+    const Image* ref = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(refsMutex);
+      auto it = refs.find(refPath);
+      if (it == refs.end()) it = refs.emplace(refPath, readImage(refPath)).first;
+      ref = &it->second;
+    }
+    return compareImages(readImage((outDir / (job.name + ".exr")).string()), *ref).toJson();
+  } catch (const Error& e) {
+    return {{"error", e.what()}};
+  }
+}
+
+/// A CSV field, quoted when it holds a comma, a quote or a line break.
+std::string csvField(const std::string& s) {
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string r = "\"";
+  for (char c : s) r += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return r + "\"";
+}
+
+/// A number from a JSON path, or "" when absent.
+std::string csvNumber(const nlohmann::json& j, const nlohmann::json::json_pointer& p, double scale = 1.0) {
+  if (!j.is_object() || !j.contains(p) || !j[p].is_number()) return "";
+  std::ostringstream s;
+  s.precision(10);
+  s << j[p].get<double>() * scale;
+  return s.str();
+}
+
+nlohmann::json resultRow(const Job& job, const JobResult& r) {
+  nlohmann::json row = {{"name", job.name}, {"status", r.status}};
+  for (const auto& [k, v] : job.spec.items()) row[k] = v;
+  if (!r.error.empty()) row["error"] = r.error;
+  if (r.sidecar.is_object()) {
+    row["timings"] = r.sidecar.value("timings", nlohmann::json::object());
+    row["peak_rss_bytes"] = r.sidecar.value("peak_rss_bytes", nlohmann::json());
+    const nlohmann::json st = r.sidecar.value("settings", nlohmann::json::object());
+    row["width"] = st.value("width", nlohmann::json());
+    row["height"] = st.value("height", nlohmann::json());
+    row["resolved_method"] = r.sidecar.value("method", nlohmann::json());
+    const nlohmann::json::json_pointer fieldBytes("/stats/integrator/field_bytes");
+    if (r.sidecar.contains(fieldBytes)) row["field_bytes"] = r.sidecar[fieldBytes];
+    row["outputs"] = r.sidecar.value("outputs", nlohmann::json::object());
+  }
+  if (!r.metrics.is_null()) row["metrics"] = r.metrics;
+  return row;
+}
+
+void writeTables(const std::vector<nlohmann::json>& rows, const std::string& stem, const nlohmann::json& info) {
+  nlohmann::json doc = info;
+  doc["rows"] = rows;
+  writeJsonAtomic(stem + ".json", doc);
+  writeFileAtomic(stem + ".csv", [&](const std::string& tmp) {
+    std::ofstream f(tmp);
+    f << "name,scene,method,spp,width,height,seed,options,status,error,load_s,build_s,prepare_s,render_s,total_s,"
+         "peak_rss_mb,field_mb,reference,relmse,mse,psnr_srgb8,ssim\n";
+    using P = nlohmann::json::json_pointer;
+    for (const nlohmann::json& r : rows) {
+      f << csvField(r["name"]) << "," << csvField(r["scene"]) << ","
+        << csvField(r.value("resolved_method", r.value("method", ""))) << "," << csvNumber(r, P("/spp")) << ","
+        << csvNumber(r, P("/width")) << "," << csvNumber(r, P("/height")) << "," << csvNumber(r, P("/seed")) << ","
+        << csvField(r["options"].dump()) << "," << r["status"].get<std::string>() << "," << csvField(r.value("error", ""))
+        << "," << csvNumber(r, P("/timings/load_seconds")) << "," << csvNumber(r, P("/timings/build_seconds")) << ","
+        << csvNumber(r, P("/timings/prepare_seconds")) << "," << csvNumber(r, P("/timings/render_seconds")) << ","
+        << csvNumber(r, P("/timings/total_seconds")) << "," << csvNumber(r, P("/peak_rss_bytes"), 1e-6) << ","
+        << csvNumber(r, P("/field_bytes"), 1e-6) << "," << csvField(r.value("reference", "")) << ","
+        << csvNumber(r, P("/metrics/relmse")) << "," << csvNumber(r, P("/metrics/mse")) << ","
+        << csvNumber(r, P("/metrics/psnr_srgb8")) << "," << csvNumber(r, P("/metrics/ssim")) << "\n";
+    }
+    if (!f) throw Error("cannot write " + tmp);
+  });
+}
+
+void runBatch(const BatchOptions& o) {
+  nlohmann::json manifest;
+  {
+    std::ifstream f(o.manifestPath);
+    if (!f) throw SettingsError("cannot read manifest " + o.manifestPath);
+    try {
+      manifest = nlohmann::json::parse(f);
+    } catch (const nlohmann::json::parse_error& e) {
+      throw SettingsError(o.manifestPath + ": not valid JSON (" + std::string(e.what()) + ")");
+    }
+  }
+  const fs::path base = fs::absolute(o.manifestPath).parent_path();
+  std::vector<Job> jobs = expandManifest(manifest, base);
+  fs::path outDir = !o.outDir.empty()
+                        ? fs::path(o.outDir)
+                        : manifest.contains("output_dir") && manifest["output_dir"].is_string()
+                              ? fs::path(resolvePath(base, manifest["output_dir"].get<std::string>()))
+                              : base / fs::path(o.manifestPath).stem();
+  std::string stem = (outDir / "results").string();
+  // This shard's jobs: index % N == I, in manifest order (every machine expands the same list).
+  if (!o.shard.empty()) {
+    const auto [i, n] = parseShard(o.shard);
+    std::vector<Job> mine;
+    for (size_t k = i; k < jobs.size(); k += n) mine.push_back(jobs[k]);
+    jobs = std::move(mine);
+    stem += "-shard-" + std::to_string(i) + "-of-" + std::to_string(n);
+  }
+  if (o.dryRun) {
+    for (const Job& j : jobs) std::printf("%s %s\n", j.name.c_str(), j.spec.dump().c_str());
+    return;
+  }
+  fs::create_directories(outDir);
+
+  std::vector<JobResult> results(jobs.size());
+  std::map<std::string, Image> refs;
+  std::mutex refsMutex, printMutex;
+  size_t finished = 0;
+  // Jobs in flight (-j) are TBB tasks, each waiting on its child process; each child renders
+  // with -t threads. A job's outputs are its render's own atomic writes: a job interrupted or
+  // failed leaves none, and --skip-existing takes a job whose sidecar (written last) is there.
+  tbb::task_arena arena(std::max(1, o.jobsInFlight));
+  arena.execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, jobs.size(), 1),
+        [&](const tbb::blocked_range<size_t>& range) {
+          for (size_t k = range.begin(); k != range.end(); ++k) {
+            const Job& job = jobs[k];
+            JobResult& r = results[k];
+            const fs::path sidecar = outDir / (job.name + ".json");
+            if (interruptRequested()) {
+              r.status = "not run";
+              r.error = "interrupted";
+              continue;
+            }
+            if (o.skipExisting && fs::exists(sidecar)) r.status = "existing";
+            else r = runJob(job, outDir, o);
+            if (r.status != "failed") {
+              try {
+                std::ifstream f(sidecar);
+                r.sidecar = nlohmann::json::parse(f);
+                r.metrics = jobMetrics(job, outDir, refs, refsMutex);
+              } catch (const std::exception& e) {
+                r.status = "failed";
+                r.error = "cannot read " + sidecar.string() + ": " + e.what();
+              }
+            }
+            std::lock_guard<std::mutex> lock(printMutex);
+            ++finished;
+            if (!o.quiet)
+              std::fprintf(stderr, "[%zu/%zu] %s: %s%s%s\n", finished, jobs.size(), job.name.c_str(), r.status.c_str(),
+                           r.error.empty() ? "" : ": ", r.error.c_str());
+          }
+        },
+        tbb::simple_partitioner());
+  });
+
+  std::vector<nlohmann::json> rows;
+  std::map<std::string, size_t> counts;
+  for (size_t k = 0; k < jobs.size(); ++k) {
+    rows.push_back(resultRow(jobs[k], results[k]));
+    ++counts[results[k].status];
+  }
+  writeTables(rows, stem,
+              {{"manifest", fs::absolute(o.manifestPath).string()}, {"shard", o.shard.empty() ? "0/1" : o.shard},
+               {"jobs_in_flight", o.jobsInFlight}, {"threads_per_job", o.threadsPerJob}});
+  std::printf("batch: %zu jobs: %zu ok, %zu existing, %zu failed, %zu not run; wrote %s.csv, %s.json\n", jobs.size(),
+              counts["ok"], counts["existing"], counts["failed"], counts["not run"], stem.c_str(), stem.c_str());
+  if (interruptRequested()) throw CancelledError();
+  if (counts["failed"] > 0) throw CLI::RuntimeError(1);
+}
+
+}  // namespace
+
+void addBatchCommand(CLI::App& app) {
+  auto o = std::make_shared<BatchOptions>();
+  CLI::App* cmd = app.add_subcommand("batch", "Run the renders of a manifest (jobs and grids of settings) in parallel");
+  cmd->add_option("manifest", o->manifestPath, "Manifest (JSON)")->required();
+  cmd->add_option("-o,--output", o->outDir, "Output folder (default: the manifest's output_dir, else <manifest>/ beside it)");
+  cmd->add_option("-j,--jobs", o->jobsInFlight, "Jobs in flight (default 1); mind memory: each holds its scene and field")
+      ->check(CLI::Range(1, 1024));
+  cmd->add_option("-t,--threads", o->threadsPerJob, "Threads per job (0 = all)")->check(CLI::Range(0, 4096));
+  cmd->add_flag("--skip-existing", o->skipExisting, "Keep jobs whose outputs exist (resume an interrupted batch)");
+  cmd->add_option("--shard", o->shard, "Run the jobs whose index % N == I (I/N), for spreading over machines");
+  cmd->add_option("--memory-budget-mb", o->memoryBudgetMb, "Heap limit per job; a job over it fails and the batch goes on")
+      ->check(CLI::PositiveNumber);
+  cmd->add_flag("--dry-run", o->dryRun, "Print the expanded jobs (name and settings) and exit");
+  cmd->add_flag("-q,--quiet", o->quiet, "No per-job lines");
+  cmd->callback([o] { runBatch(*o); });
+}
+
+}  // namespace voxcone

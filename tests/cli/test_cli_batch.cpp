@@ -1,0 +1,187 @@
+// `voxcone batch`: grid expansion and deterministic names, parallel jobs with the same images as
+// serial ones, a failed job recorded while the batch goes on, --skip-existing, --shard, the
+// memory budget, and metrics against a reference that match `compare`.
+
+#include "voxcone/image/image_io.h"
+#include "voxcone/image/metrics.h"
+
+#include "../support/temp_dir.h"
+#include "../support/test_scenes.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sys/wait.h>
+
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+namespace voxcone {
+namespace {
+
+namespace fs = std::filesystem;
+
+class Batch : public test::TempDirTest {
+protected:
+  /// Run `voxcone ARGS`; returns the exit code, stdout in m_out.
+  int run(const std::string& args) {
+    const std::string cmd = std::string(VOXCONE_CLI_PATH) + " " + args + " >" + path("stdout.txt") + " 2>" + path("stderr.txt");
+    const int status = std::system(cmd.c_str());
+    std::ifstream f(path("stdout.txt"));
+    m_out.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  std::string writeManifest(const nlohmann::json& m, const std::string& name = "manifest.json") {
+    std::ofstream(path(name)) << m.dump(1);
+    return path(name);
+  }
+  nlohmann::json readJson(const std::string& p) {
+    std::ifstream f(p);
+    return nlohmann::json::parse(f);
+  }
+  /// A grid of 2 spp values x 2 levels of voxcone plus one path job, tiny.
+  nlohmann::json gridManifest(const std::string& reference = "") {
+    nlohmann::json m = {
+        {"defaults", {{"scene", test::sourceDir() + "/data/scenes/cornell-box.json"}, {"res", "12x12"}}},
+        {"jobs", {{{"name", "path-ref"}, {"method", "path"}, {"spp", 2}}}},
+        {"grid", {{{"method", "voxcone"}, {"spp", {1, 2}}, {"options", {{"level", {4, 5}}, {"photons", 2000}}}}}}};
+    if (!reference.empty()) m["reference"] = reference;
+    return m;
+  }
+  std::string m_out;
+};
+
+TEST_F(Batch, GridExpandsIntoNamedJobsAndParallelEqualsSerial) {
+  const std::string manifest = writeManifest(gridManifest());
+  ASSERT_EQ(run("batch " + manifest + " --dry-run"), 0);
+  // 1 job + 2 x 2 grid jobs, in order: axes in key order ("options" before "spp"), the last
+  // varying fastest.
+  std::istringstream lines(m_out);
+  std::vector<std::string> names;
+  for (std::string l; std::getline(lines, l);) names.push_back(l.substr(0, l.find(' ')));
+  ASSERT_EQ(names.size(), 5u);
+  EXPECT_EQ(names[0], "path-ref");
+  EXPECT_EQ(names[1].rfind("cornell-box_voxcone_spp1_level4_photons2000_", 0), 0u) << names[1];
+  EXPECT_EQ(names[2].rfind("cornell-box_voxcone_spp2_level4_photons2000_", 0), 0u) << names[2];
+  EXPECT_EQ(names[4].rfind("cornell-box_voxcone_spp2_level5_photons2000_", 0), 0u) << names[4];
+  // The names are the same on another run (they hash the settings, not the time or the order).
+  const std::string first = m_out;
+  ASSERT_EQ(run("batch " + manifest + " --dry-run"), 0);
+  EXPECT_EQ(m_out, first);
+
+  ASSERT_EQ(run("batch " + manifest + " -j 1 -t 1 -q -o " + path("serial")), 0) << m_out;
+  ASSERT_EQ(run("batch " + manifest + " -j 3 -t 1 -q -o " + path("parallel")), 0) << m_out;
+  for (const std::string& n : names) {
+    const Image a = readImage(path("serial/" + n + ".exr")), b = readImage(path("parallel/" + n + ".exr"));
+    ASSERT_EQ(a.pixels.size(), b.pixels.size());
+    EXPECT_TRUE(a.pixels == b.pixels) << n;
+  }
+  const nlohmann::json t = readJson(path("parallel/results.json"));
+  ASSERT_EQ(t["rows"].size(), 5u);
+  for (size_t i = 0; i < names.size(); ++i) {
+    const nlohmann::json& r = t["rows"][i];
+    EXPECT_EQ(r["name"], names[i]);  // rows in manifest order, whatever finished first
+    EXPECT_EQ(r["status"], "ok");
+    EXPECT_EQ(r["width"], 12);
+    EXPECT_GT(r["timings"]["total_seconds"].get<double>(), 0.0);
+    EXPECT_GT(r["peak_rss_bytes"].get<double>(), 0.0);
+    EXPECT_EQ(r.contains("field_bytes"), i > 0);  // voxcone jobs report their grid memory
+  }
+  // The CSV has a header and one line per job.
+  std::ifstream csv(path("parallel/results.csv"));
+  size_t csvLines = 0;
+  for (std::string l; std::getline(csv, l);) ++csvLines;
+  EXPECT_EQ(csvLines, 6u);
+}
+
+TEST_F(Batch, AFailedJobIsRecordedAndTheRestRun) {
+  nlohmann::json m = gridManifest();
+  m["jobs"].push_back({{"name", "missing"}, {"scene", "no-such-scene.json"}});
+  m["jobs"].push_back({{"name", "bad-option"}, {"method", "voxcone"}, {"options", {{"no_such_option", 1}}}});
+  const std::string manifest = writeManifest(m);
+  EXPECT_EQ(run("batch " + manifest + " -j 2 -t 1 -q -o " + path("out")), 1);
+  const nlohmann::json t = readJson(path("out/results.json"));
+  ASSERT_EQ(t["rows"].size(), 7u);
+  int ok = 0;
+  for (const nlohmann::json& r : t["rows"]) {
+    if (r["name"] == "missing" || r["name"] == "bad-option") {
+      EXPECT_EQ(r["status"], "failed");
+      EXPECT_FALSE(r["error"].get<std::string>().empty());
+      EXPECT_FALSE(fs::exists(path("out/" + r["name"].get<std::string>() + ".exr")));
+    } else {
+      ok += r["status"] == "ok";
+    }
+  }
+  EXPECT_EQ(ok, 5);
+  EXPECT_NE(t["rows"][2]["error"].get<std::string>().find("no_such_option"), std::string::npos) << t["rows"][2];
+}
+
+TEST_F(Batch, SkipExistingAndShards) {
+  const std::string manifest = writeManifest(gridManifest());
+  // Two shards cover the jobs once between them.
+  ASSERT_EQ(run("batch " + manifest + " --shard 0/2 -t 1 -q -o " + path("out")), 0);
+  ASSERT_EQ(run("batch " + manifest + " --shard 1/2 -t 1 -q -o " + path("out")), 0);
+  const nlohmann::json s0 = readJson(path("out/results-shard-0-of-2.json")), s1 = readJson(path("out/results-shard-1-of-2.json"));
+  EXPECT_EQ(s0["rows"].size(), 3u);
+  EXPECT_EQ(s1["rows"].size(), 2u);
+  std::set<std::string> all;
+  for (const auto* s : {&s0, &s1})
+    for (const nlohmann::json& r : (*s)["rows"]) EXPECT_TRUE(all.insert(r["name"].get<std::string>()).second);
+  EXPECT_EQ(all.size(), 5u);
+  // Everything is there: --skip-existing runs nothing and tables the existing outputs.
+  const auto stamp = fs::last_write_time(path("out/path-ref.exr"));
+  ASSERT_EQ(run("batch " + manifest + " --skip-existing -t 1 -q -o " + path("out")), 0);
+  EXPECT_EQ(fs::last_write_time(path("out/path-ref.exr")), stamp);
+  const nlohmann::json t = readJson(path("out/results.json"));
+  ASSERT_EQ(t["rows"].size(), 5u);
+  for (const nlohmann::json& r : t["rows"]) {
+    EXPECT_EQ(r["status"], "existing");
+    EXPECT_GT(r["timings"]["render_seconds"].get<double>(), 0.0);
+  }
+  // An interrupted batch left some jobs undone: only those run.
+  fs::remove(path("out/path-ref.json"));
+  ASSERT_EQ(run("batch " + manifest + " --skip-existing -t 1 -q -o " + path("out")), 0);
+  EXPECT_EQ(readJson(path("out/results.json"))["rows"][0]["status"], "ok");
+  EXPECT_NE(run("batch " + manifest + " --shard 2/2"), 0);
+}
+
+TEST_F(Batch, MetricsAgainstTheReferenceMatchCompare) {
+  const std::string ref = path("ref.exr");
+  ASSERT_EQ(run("render " + test::sourceDir() + "/data/scenes/cornell-box.json --res 12x12 --spp 64 -q -o " + ref), 0);
+  const std::string manifest = writeManifest(gridManifest(ref));
+  ASSERT_EQ(run("batch " + manifest + " -j 2 -t 1 -q -o " + path("out")), 0);
+  const nlohmann::json t = readJson(path("out/results.json"));
+  const Image reference = readImage(ref);
+  for (const nlohmann::json& r : t["rows"]) {
+    const ImageMetrics m = compareImages(readImage(path("out/" + r["name"].get<std::string>() + ".exr")), reference);
+    EXPECT_NEAR(r["metrics"]["relmse"].get<double>(), m.relMse, 1e-12 * (1.0 + m.relMse));
+    EXPECT_NEAR(r["metrics"]["psnr_srgb8"].get<double>(), m.psnrSrgb8, 1e-9);
+  }
+}
+
+TEST_F(Batch, MemoryBudgetFailsTheJobNotTheBatch) {
+  nlohmann::json m = gridManifest();
+  m.erase("grid");
+  m["jobs"].push_back({{"name", "big"}, {"method", "voxcone"}, {"options", {{"level", 9}, {"photons", 200000}}}});
+  const std::string manifest = writeManifest(m);
+  // The executable and its libraries alone take ~130 MB; level 9 needs more than 200 MB.
+  EXPECT_EQ(run("batch " + manifest + " --memory-budget-mb 200 -t 1 -q -o " + path("out")), 1);
+  const nlohmann::json t = readJson(path("out/results.json"));
+  EXPECT_EQ(t["rows"][0]["status"], "ok");
+  EXPECT_EQ(t["rows"][1]["status"], "failed");
+  EXPECT_NE(t["rows"][1]["error"].get<std::string>().find("memory"), std::string::npos) << t["rows"][1];
+  EXPECT_FALSE(fs::exists(path("out/big.exr")));
+}
+
+TEST_F(Batch, BadManifestsAreOneLineErrors) {
+  for (const std::string bad : {R"({"jobs": [{"scene": "a.json", "sp": 4}]})", R"({"grid": {"spp": []}})",
+                                R"({"jobs": [{"spp": 4}]})", R"({"jobs": [{"name": "x/y", "scene": "a.json"}]})",
+                                R"({"jobs": [{"scene": "a.json"}, {"scene": "a.json"}]})", R"({"jobz": []})", "not json"}) {
+    std::ofstream(path("bad.json")) << bad;
+    EXPECT_EQ(run("batch " + path("bad.json") + " --dry-run"), 2) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace voxcone
