@@ -9,10 +9,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include <sys/wait.h>
-#include <unistd.h>
+#include <algorithm>
+#include <cmath>
+#include <limits>
 
-#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +20,8 @@
 #include <regex>
 
 namespace voxcone {
+
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -123,6 +125,163 @@ void runStudyMemory(const StudyOptions& o) {
   std::printf("%s", out.c_str());
 }
 
+struct SpeedAccuracyOptions {
+  std::string scenePath;
+  std::string referencePath;
+  std::string outDir = "out/study-speed-accuracy";
+  std::string resolution;
+  int jobsInFlight = 1;
+  int threads = 0;
+  bool quick = false;
+  bool noChart = false;
+  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_speed_accuracy.py";
+};
+
+/// The settings each method is swept over (path spp; pm photons; voxcone level x photons x
+/// cones), as a batch manifest.
+nlohmann::json speedAccuracyManifest(const SpeedAccuracyOptions& o) {
+  nlohmann::json defaults = {{"scene", fs::absolute(o.scenePath).string()}};
+  if (!o.resolution.empty()) defaults["res"] = o.resolution;
+  nlohmann::json grid;
+  if (o.quick) {
+    grid = {{{"method", "path"}, {"spp", {1, 4, 16}}},
+            {{"method", "pm"}, {"spp", 2}, {"options", {{"photons", {2000, 8000}}}}},
+            {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}}};
+  } else {
+    grid = {{{"method", "path"}, {"spp", {4, 16, 64, 256, 1024}}},
+            {{"method", "pm"}, {"spp", 16}, {"options", {{"photons", {100000, 300000, 1000000}}}}},
+            {{"method", "voxcone"}, {"spp", {4, 16}},
+             {"options", {{"level", {6, 7}}, {"photons", {250000, 1000000}}, {"cones", {6, 16}}}}}};
+  }
+  return {{"reference", fs::absolute(o.referencePath).string()}, {"defaults", defaults}, {"grid", grid}};
+}
+
+/// Indices of the Pareto front of `pts` (time, error), both minimized: the points no other point
+/// beats on both; sorted by time.
+std::vector<size_t> paretoFront(const std::vector<std::pair<double, double>>& pts) {
+  std::vector<size_t> order(pts.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return pts[a].first != pts[b].first ? pts[a].first < pts[b].first : pts[a].second < pts[b].second;
+  });
+  std::vector<size_t> front;
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t i : order)
+    if (pts[i].second < best) {
+      front.push_back(i);
+      best = pts[i].second;
+    }
+  return front;
+}
+
+/// y at x on a front (sorted by x), log-log linear between its points; NaN outside it.
+double onFront(const std::vector<std::pair<double, double>>& front, double x) {
+  for (size_t i = 0; i + 1 < front.size(); ++i) {
+    const auto& [x0, y0] = front[i];
+    const auto& [x1, y1] = front[i + 1];
+    if (x0 <= x && x <= x1) {
+      const double u = x1 > x0 ? (std::log(x) - std::log(x0)) / (std::log(x1) - std::log(x0)) : 0.0;
+      return std::exp(std::log(y0) + u * (std::log(y1) - std::log(y0)));
+    }
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+void runStudySpeedAccuracy(const SpeedAccuracyOptions& o) {
+  if (!fs::exists(o.scenePath)) throw SettingsError("scene file not found: " + o.scenePath);
+  if (!fs::exists(o.referencePath)) throw SettingsError("reference image not found: " + o.referencePath);
+  fs::create_directories(o.outDir);
+  const std::string manifestPath = o.outDir + "/manifest.json";
+  writeJsonAtomic(manifestPath, speedAccuracyManifest(o));
+  // The renders are a batch (resumable: finished jobs are kept); failed jobs are tabled.
+  std::string out;
+  const std::string cmd = shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
+                          shellQuote(o.outDir + "/runs") + " -j " + std::to_string(o.jobsInFlight) + " -t " +
+                          std::to_string(o.threads) + " 2>&1";
+  const int code = runCapture(cmd, out);
+  if (code != 0 && code != 1) throw Error("batch failed: " + out.substr(0, out.find('\n')));
+  std::ifstream f(o.outDir + "/runs/results.json");
+  const nlohmann::json results = nlohmann::json::parse(f);
+
+  // One row per successful render; the Pareto front of each method in (time, relMSE).
+  nlohmann::json rows = nlohmann::json::array();
+  std::map<std::string, std::vector<size_t>> byMethod;
+  for (const nlohmann::json& r : results["rows"]) {
+    if (r["status"] != "ok" && r["status"] != "existing") continue;
+    if (!r.contains("metrics") || !r["metrics"].contains("relmse")) continue;
+    byMethod[r["method"].get<std::string>()].push_back(rows.size());
+    rows.push_back({{"name", r["name"]}, {"method", r["method"]}, {"spp", r.value("spp", 0)}, {"options", r["options"]},
+                    {"seconds", r["timings"]["total_seconds"]}, {"relmse", r["metrics"]["relmse"]},
+                    {"psnr_srgb8", r["metrics"]["psnr_srgb8"]}, {"peak_rss_bytes", r["peak_rss_bytes"]},
+                    {"field_bytes", r.value("field_bytes", nlohmann::json(0))}, {"pareto", false}});
+  }
+  std::map<std::string, std::vector<std::pair<double, double>>> fronts;
+  for (const auto& [method, idx] : byMethod) {
+    std::vector<std::pair<double, double>> pts;
+    for (size_t i : idx) pts.emplace_back(rows[i]["seconds"].get<double>(), rows[i]["relmse"].get<double>());
+    for (size_t k : paretoFront(pts)) {
+      rows[idx[k]]["pareto"] = true;
+      fronts[method].push_back(pts[k]);
+    }
+  }
+  // Equal-time and equal-error comparisons: each front point of pm and voxcone against path's front.
+  nlohmann::json compare = nlohmann::json::array();
+  const auto& pathFront = fronts["path"];
+  for (const nlohmann::json& r : rows) {
+    if (!r["pareto"].get<bool>() || r["method"] == "path") continue;
+    const double t = r["seconds"].get<double>(), e = r["relmse"].get<double>();
+    // Path's front inverted (error -> time): the front is sorted by time, errors falling.
+    std::vector<std::pair<double, double>> inv;
+    for (auto it = pathFront.rbegin(); it != pathFront.rend(); ++it) inv.emplace_back(it->second, it->first);
+    const double pathErr = onFront(pathFront, t), pathTime = onFront(inv, e);
+    auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+    compare.push_back({{"name", r["name"]}, {"method", r["method"]}, {"seconds", t}, {"relmse", e},
+                       {"psnr_srgb8", r["psnr_srgb8"]},
+                       {"path_relmse_at_equal_time", num(pathErr)}, {"path_seconds_at_equal_relmse", num(pathTime)},
+                       {"speedup_vs_path", num(pathTime / t)}});
+  }
+  const nlohmann::json study = {{"study", "speed-accuracy"}, {"scene", o.scenePath}, {"reference", o.referencePath},
+                                {"rows", rows}, {"comparisons", compare}};
+  const std::string stem = o.outDir + "/speed-accuracy";
+  writeJsonAtomic(stem + ".json", study);
+  writeFileAtomic(stem + ".csv", [&](const std::string& tmp) {
+    std::ofstream c(tmp);
+    c << "name,method,spp,options,seconds,relmse,psnr_srgb8,peak_rss_mb,field_mb,pareto\n";
+    for (const nlohmann::json& r : rows) {
+      std::string opts = r["options"].dump();
+      std::string quoted = "\"";
+      for (char ch : opts) quoted += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+      c << r["name"].get<std::string>() << "," << r["method"].get<std::string>() << "," << r["spp"] << "," << quoted
+        << "\"," << r["seconds"] << "," << r["relmse"] << "," << r["psnr_srgb8"] << ","
+        << r["peak_rss_bytes"].get<double>() / 1e6 << "," << r["field_bytes"].get<double>() / 1e6 << ","
+        << (r["pareto"].get<bool>() ? 1 : 0) << "\n";
+    }
+    if (!c) throw Error("cannot write " + tmp);
+  });
+  std::printf("%-8s %-48s %9s %10s %8s %10s %10s\n", "method", "front point", "time s", "relMSE", "PSNR",
+              "path relMSE", "path s");
+  std::printf("%-8s %-48s %9s %10s %8s %10s %10s\n", "", "", "", "", "", "same time", "same error");
+  for (const nlohmann::json& c : compare) {
+    auto show = [](const nlohmann::json& v, const char* fmt) {
+      char b[32];
+      if (v.is_null()) return std::string("-");
+      std::snprintf(b, sizeof b, fmt, v.get<double>());
+      return std::string(b);
+    };
+    std::printf("%-8s %-48s %9.2f %10.5f %8s %10s %10s\n", c["method"].get<std::string>().c_str(),
+                c["name"].get<std::string>().substr(0, 48).c_str(), c["seconds"].get<double>(), c["relmse"].get<double>(),
+                show(c["psnr_srgb8"], "%.2f").c_str(), show(c["path_relmse_at_equal_time"], "%.5f").c_str(),
+                show(c["path_seconds_at_equal_relmse"], "%.2f").c_str());
+  }
+  std::printf("wrote %s.csv, %s.json\n", stem.c_str(), stem.c_str());
+  if (o.noChart) return;
+  std::string plotOut;
+  const std::string plot = "/usr/bin/python3 " + shellQuote(o.plotScript) + " " + shellQuote(stem + ".json") + " " +
+                           shellQuote(stem) + " 2>&1";
+  if (runCapture(plot, plotOut) != 0) throw Error("chart script failed: " + plotOut.substr(0, plotOut.find('\n')));
+  std::printf("%s", plotOut.c_str());
+}
+
 }  // namespace
 
 void addStudyCommand(CLI::App& app) {
@@ -138,6 +297,20 @@ void addStudyCommand(CLI::App& app) {
   mem->add_option("--plot-script", o->plotScript, "Chart script (python3-matplotlib)");
   mem->add_flag("--no-chart", o->noChart, "Write CSV and JSON only");
   mem->callback([o] { runStudyMemory(*o); });
+
+  auto sa = std::make_shared<SpeedAccuracyOptions>();
+  CLI::App* spd = study->add_subcommand(
+      "speed-accuracy", "Every method over its settings: time against error, Pareto fronts, equal-time/error table");
+  spd->add_option("scene", sa->scenePath, "Scene file (JSON)")->required();
+  spd->add_option("--reference", sa->referencePath, "Converged reference image (EXR)")->required();
+  spd->add_option("-o,--output", sa->outDir, "Output folder (default out/study-speed-accuracy)");
+  spd->add_option("--res", sa->resolution, "Resolution WIDTHxHEIGHT (the reference's)");
+  spd->add_option("-j,--jobs", sa->jobsInFlight, "Renders in flight")->check(CLI::Range(1, 1024));
+  spd->add_option("-t,--threads", sa->threads, "Threads per render (0 = all)")->check(CLI::Range(0, 4096));
+  spd->add_flag("--quick", sa->quick, "A few cheap settings (for tests)");
+  spd->add_option("--plot-script", sa->plotScript, "Chart script (python3-matplotlib)");
+  spd->add_flag("--no-chart", sa->noChart, "Write CSV and JSON only");
+  spd->callback([sa] { runStudySpeedAccuracy(*sa); });
 }
 
 }  // namespace voxcone

@@ -1,0 +1,87 @@
+// `voxcone study speed-accuracy --quick` and tools/plot_speed_accuracy.py: the study's table,
+// its Pareto fronts checked by brute force, and a chart that plots the study's numbers.
+
+#include "../support/temp_dir.h"
+#include "../support/test_scenes.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+namespace voxcone {
+namespace {
+
+class StudySpeedAccuracy : public test::TempDirTest {};
+
+TEST_F(StudySpeedAccuracy, QuickStudyTablesFrontsAndChart) {
+  const std::string cli = VOXCONE_CLI_PATH;
+  if (!std::filesystem::exists(cli)) GTEST_SKIP() << "no CLI at " << cli;
+  const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
+  ASSERT_EQ(std::system((cli + " render " + scene + " --res 16x16 --spp 64 -q -o " + path("ref") + " > /dev/null").c_str()), 0);
+  const std::string cmd = cli + " study speed-accuracy " + scene + " --reference " + path("ref.exr") +
+                          " --quick --res 16x16 -j 2 -t 1 -o " + path("study") + " > " + path("out.txt") + " 2>&1";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << std::ifstream(path("out.txt")).rdbuf();
+  std::ifstream f(path("study/speed-accuracy.json"));
+  const nlohmann::json study = nlohmann::json::parse(f);
+  const nlohmann::json& rows = study["rows"];
+  ASSERT_EQ(rows.size(), 9u);  // path 3 spp, pm 2 photon counts, voxcone 2 levels x 2 cone counts
+
+  // Pareto flags by brute force: a render is on its method's front when no other render of the
+  // method is at least as fast and more accurate, or faster and at least as accurate.
+  int fronts = 0;
+  for (const nlohmann::json& a : rows) {
+    bool dominated = false;
+    for (const nlohmann::json& b : rows) {
+      if (&a == &b || a["method"] != b["method"]) continue;
+      const double ta = a["seconds"], tb = b["seconds"], ea = a["relmse"], eb = b["relmse"];
+      dominated = dominated || (tb <= ta && eb < ea) || (tb < ta && eb <= ea);
+    }
+    EXPECT_EQ(a["pareto"].get<bool>(), !dominated) << a["name"];
+    fronts += a["pareto"].get<bool>();
+  }
+  EXPECT_GE(fronts, 3);  // at least one per method
+  // One comparison per pm / voxcone front point; where defined, path's time at equal error lies
+  // within path's front.
+  double pathMin = 1e30, pathMax = 0.0;
+  for (const nlohmann::json& r : rows)
+    if (r["method"] == "path" && r["pareto"].get<bool>()) {
+      pathMin = std::min(pathMin, r["seconds"].get<double>());
+      pathMax = std::max(pathMax, r["seconds"].get<double>());
+    }
+  int nonPathFront = 0;
+  for (const nlohmann::json& r : rows) nonPathFront += r["pareto"].get<bool>() && r["method"] != "path";
+  ASSERT_EQ(study["comparisons"].size(), size_t(nonPathFront));
+  for (const nlohmann::json& c : study["comparisons"])
+    if (!c["path_seconds_at_equal_relmse"].is_null()) {
+      EXPECT_GE(c["path_seconds_at_equal_relmse"].get<double>(), pathMin * (1 - 1e-9));
+      EXPECT_LE(c["path_seconds_at_equal_relmse"].get<double>(), pathMax * (1 + 1e-9));
+    }
+
+  // The chart exists and plots exactly the study's numbers.
+  EXPECT_GT(std::filesystem::file_size(path("study/speed-accuracy.png")), 10000u);
+  EXPECT_GT(std::filesystem::file_size(path("study/speed-accuracy.svg")), 10000u);
+  std::ifstream p(path("study/speed-accuracy.plotted.json"));
+  const nlohmann::json plotted = nlohmann::json::parse(p);
+  std::map<std::string, size_t> seen;
+  for (const nlohmann::json& r : rows) {
+    const std::string m = r["method"];
+    const size_t k = seen[m]++;
+    EXPECT_DOUBLE_EQ(plotted[m]["seconds"][k].get<double>(), r["seconds"].get<double>());
+    EXPECT_DOUBLE_EQ(plotted[m]["relmse"][k].get<double>(), r["relmse"].get<double>());
+  }
+  // The CSV: a header and one line per render.
+  std::ifstream csv(path("study/speed-accuracy.csv"));
+  size_t lines = 0;
+  for (std::string l; std::getline(csv, l);) ++lines;
+  EXPECT_EQ(lines, rows.size() + 1);
+}
+
+}  // namespace
+}  // namespace voxcone
