@@ -301,6 +301,7 @@ nlohmann::json resultRow(const Job& job, const JobResult& r) {
     row["width"] = st.value("width", nlohmann::json());
     row["height"] = st.value("height", nlohmann::json());
     row["resolved_method"] = r.sidecar.value("method", nlohmann::json());
+    row["integrator"] = st.value("integrator", nlohmann::json::object());
     const nlohmann::json::json_pointer fieldBytes("/stats/integrator/field_bytes");
     if (r.sidecar.contains(fieldBytes)) row["field_bytes"] = r.sidecar[fieldBytes];
     row["outputs"] = r.sidecar.value("outputs", nlohmann::json::object());

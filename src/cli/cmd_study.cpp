@@ -125,25 +125,42 @@ void runStudyMemory(const StudyOptions& o) {
   std::printf("%s", out.c_str());
 }
 
-struct SpeedAccuracyOptions {
+/// A study that is a batch of renders against a reference: speed-accuracy, photons or levels.
+struct SweepOptions {
+  std::string kind;
   std::string scenePath;
   std::string referencePath;
-  std::string outDir = "out/study-speed-accuracy";
+  std::string outDir;
   std::string resolution;
   int jobsInFlight = 1;
   int threads = 0;
   bool quick = false;
   bool noChart = false;
-  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_speed_accuracy.py";
+  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_study.py";
 };
 
-/// The settings each method is swept over (path spp; pm photons; voxcone level x photons x
-/// cones), as a batch manifest.
-nlohmann::json speedAccuracyManifest(const SpeedAccuracyOptions& o) {
+/// The study's renders as a batch manifest. speed-accuracy: every method over its settings (path
+/// spp; pm photons; voxcone level x photons x cones x spp); photons: pm and voxcone over photon
+/// counts from the 1000-5000 of the study we compare with up to 1M; levels: voxcone over voxel
+/// levels.
+nlohmann::json sweepManifest(const SweepOptions& o) {
   nlohmann::json defaults = {{"scene", fs::absolute(o.scenePath).string()}};
   if (!o.resolution.empty()) defaults["res"] = o.resolution;
   nlohmann::json grid;
-  if (o.quick) {
+  if (o.kind == "photons") {
+    const nlohmann::json photons = o.quick ? nlohmann::json{1000, 4000}
+                                           : nlohmann::json{1000, 2000, 5000, 10000, 100000, 1000000};
+    const nlohmann::json base = o.quick ? nlohmann::json{{"level", 4}} : nlohmann::json::object();
+    nlohmann::json vc = base, pm = nlohmann::json::object();
+    vc["photons"] = photons;
+    pm["photons"] = photons;
+    grid = {{{"method", "pm"}, {"spp", o.quick ? 2 : 16}, {"options", pm}},
+            {{"method", "voxcone"}, {"spp", o.quick ? 2 : 16}, {"options", vc}}};
+  } else if (o.kind == "levels") {
+    nlohmann::json options = {{"level", o.quick ? nlohmann::json{3, 4, 5} : nlohmann::json{5, 6, 7, 8, 9}}};
+    if (o.quick) options["photons"] = 4000;
+    grid = {{{"method", "voxcone"}, {"spp", o.quick ? 1 : 16}, {"options", options}}};
+  } else if (o.quick) {
     grid = {{{"method", "path"}, {"spp", {1, 4, 16}}},
             {{"method", "pm"}, {"spp", 2}, {"options", {{"photons", {2000, 8000}}}}},
             {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}}};
@@ -187,12 +204,12 @@ double onFront(const std::vector<std::pair<double, double>>& front, double x) {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-void runStudySpeedAccuracy(const SpeedAccuracyOptions& o) {
+void runSweepStudy(const SweepOptions& o) {
   if (!fs::exists(o.scenePath)) throw SettingsError("scene file not found: " + o.scenePath);
   if (!fs::exists(o.referencePath)) throw SettingsError("reference image not found: " + o.referencePath);
   fs::create_directories(o.outDir);
   const std::string manifestPath = o.outDir + "/manifest.json";
-  writeJsonAtomic(manifestPath, speedAccuracyManifest(o));
+  writeJsonAtomic(manifestPath, sweepManifest(o));
   // The renders are a batch (resumable: finished jobs are kept); failed jobs are tabled.
   std::string out;
   const std::string cmd = shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
@@ -210,9 +227,12 @@ void runStudySpeedAccuracy(const SpeedAccuracyOptions& o) {
     if (r["status"] != "ok" && r["status"] != "existing") continue;
     if (!r.contains("metrics") || !r["metrics"].contains("relmse")) continue;
     byMethod[r["method"].get<std::string>()].push_back(rows.size());
+    const nlohmann::json st = r.value("integrator", nlohmann::json::object());
     rows.push_back({{"name", r["name"]}, {"method", r["method"]}, {"spp", r.value("spp", 0)}, {"options", r["options"]},
+                    {"photons", st.value("photons", nlohmann::json())}, {"level", st.value("level", nlohmann::json())},
                     {"seconds", r["timings"]["total_seconds"]}, {"relmse", r["metrics"]["relmse"]},
-                    {"psnr_srgb8", r["metrics"]["psnr_srgb8"]}, {"peak_rss_bytes", r["peak_rss_bytes"]},
+                    {"psnr_srgb8", r["metrics"]["psnr_srgb8"]}, {"mse", r["metrics"]["mse"]},
+                    {"peak_rss_bytes", r["peak_rss_bytes"]},
                     {"field_bytes", r.value("field_bytes", nlohmann::json(0))}, {"pareto", false}});
   }
   std::map<std::string, std::vector<std::pair<double, double>>> fronts;
@@ -240,24 +260,27 @@ void runStudySpeedAccuracy(const SpeedAccuracyOptions& o) {
                        {"path_relmse_at_equal_time", num(pathErr)}, {"path_seconds_at_equal_relmse", num(pathTime)},
                        {"speedup_vs_path", num(pathTime / t)}});
   }
-  const nlohmann::json study = {{"study", "speed-accuracy"}, {"scene", o.scenePath}, {"reference", o.referencePath},
+  const nlohmann::json study = {{"study", o.kind}, {"scene", o.scenePath}, {"reference", o.referencePath},
                                 {"rows", rows}, {"comparisons", compare}};
-  const std::string stem = o.outDir + "/speed-accuracy";
+  const std::string stem = o.outDir + "/" + o.kind;
   writeJsonAtomic(stem + ".json", study);
   writeFileAtomic(stem + ".csv", [&](const std::string& tmp) {
     std::ofstream c(tmp);
-    c << "name,method,spp,options,seconds,relmse,psnr_srgb8,peak_rss_mb,field_mb,pareto\n";
+    c << "name,method,spp,photons,level,options,seconds,relmse,mse,psnr_srgb8,peak_rss_mb,field_mb,pareto\n";
     for (const nlohmann::json& r : rows) {
       std::string opts = r["options"].dump();
       std::string quoted = "\"";
       for (char ch : opts) quoted += ch == '"' ? std::string("\"\"") : std::string(1, ch);
-      c << r["name"].get<std::string>() << "," << r["method"].get<std::string>() << "," << r["spp"] << "," << quoted
-        << "\"," << r["seconds"] << "," << r["relmse"] << "," << r["psnr_srgb8"] << ","
+      auto orEmpty = [](const nlohmann::json& v) { return v.is_null() ? std::string() : v.dump(); };
+      c << r["name"].get<std::string>() << "," << r["method"].get<std::string>() << "," << r["spp"] << ","
+        << orEmpty(r["photons"]) << "," << orEmpty(r["level"]) << "," << quoted << "\"," << r["seconds"] << ","
+        << r["relmse"] << "," << r["mse"] << "," << r["psnr_srgb8"] << ","
         << r["peak_rss_bytes"].get<double>() / 1e6 << "," << r["field_bytes"].get<double>() / 1e6 << ","
         << (r["pareto"].get<bool>() ? 1 : 0) << "\n";
     }
     if (!c) throw Error("cannot write " + tmp);
   });
+  if (o.kind == "speed-accuracy") {
   std::printf("%-8s %-48s %9s %10s %8s %10s %10s\n", "method", "front point", "time s", "relMSE", "PSNR",
               "path relMSE", "path s");
   std::printf("%-8s %-48s %9s %10s %8s %10s %10s\n", "", "", "", "", "", "same time", "same error");
@@ -272,6 +295,17 @@ void runStudySpeedAccuracy(const SpeedAccuracyOptions& o) {
                 c["name"].get<std::string>().substr(0, 48).c_str(), c["seconds"].get<double>(), c["relmse"].get<double>(),
                 show(c["psnr_srgb8"], "%.2f").c_str(), show(c["path_relmse_at_equal_time"], "%.5f").c_str(),
                 show(c["path_seconds_at_equal_relmse"], "%.2f").c_str());
+  }
+  } else {
+    std::printf("%-8s %8s %6s %9s %10s %10s %8s %10s\n", "method", "photons", "level", "time s", "relMSE", "MSE",
+                "PSNR", "field MB");
+    for (const nlohmann::json& r : rows) {
+      auto num = [](const nlohmann::json& v) { return v.is_null() ? std::string("-") : v.dump(); };
+      std::printf("%-8s %8s %6s %9.2f %10.5f %10.3g %8.2f %10.2f\n", r["method"].get<std::string>().c_str(),
+                  num(r["photons"]).c_str(), num(r["level"]).c_str(), r["seconds"].get<double>(),
+                  r["relmse"].get<double>(), r["mse"].get<double>(),
+                  r["psnr_srgb8"].is_null() ? 0.0 : r["psnr_srgb8"].get<double>(), r["field_bytes"].get<double>() / 1e6);
+    }
   }
   std::printf("wrote %s.csv, %s.json\n", stem.c_str(), stem.c_str());
   if (o.noChart) return;
@@ -298,19 +332,26 @@ void addStudyCommand(CLI::App& app) {
   mem->add_flag("--no-chart", o->noChart, "Write CSV and JSON only");
   mem->callback([o] { runStudyMemory(*o); });
 
-  auto sa = std::make_shared<SpeedAccuracyOptions>();
-  CLI::App* spd = study->add_subcommand(
-      "speed-accuracy", "Every method over its settings: time against error, Pareto fronts, equal-time/error table");
-  spd->add_option("scene", sa->scenePath, "Scene file (JSON)")->required();
-  spd->add_option("--reference", sa->referencePath, "Converged reference image (EXR)")->required();
-  spd->add_option("-o,--output", sa->outDir, "Output folder (default out/study-speed-accuracy)");
-  spd->add_option("--res", sa->resolution, "Resolution WIDTHxHEIGHT (the reference's)");
-  spd->add_option("-j,--jobs", sa->jobsInFlight, "Renders in flight")->check(CLI::Range(1, 1024));
-  spd->add_option("-t,--threads", sa->threads, "Threads per render (0 = all)")->check(CLI::Range(0, 4096));
-  spd->add_flag("--quick", sa->quick, "A few cheap settings (for tests)");
-  spd->add_option("--plot-script", sa->plotScript, "Chart script (python3-matplotlib)");
-  spd->add_flag("--no-chart", sa->noChart, "Write CSV and JSON only");
-  spd->callback([sa] { runStudySpeedAccuracy(*sa); });
+  const std::pair<const char*, const char*> sweeps[] = {
+      {"speed-accuracy", "Every method over its settings: time against error, Pareto fronts, equal-time/error table"},
+      {"photons", "Error (MSE, PSNR) against photon count for pm and voxcone"},
+      {"levels", "voxcone's time, memory and error against voxel level"}};
+  for (const auto& [kind, help] : sweeps) {
+    auto so = std::make_shared<SweepOptions>();
+    so->kind = kind;
+    so->outDir = std::string("out/study-") + kind;
+    CLI::App* cmd = study->add_subcommand(kind, help);
+    cmd->add_option("scene", so->scenePath, "Scene file (JSON)")->required();
+    cmd->add_option("--reference", so->referencePath, "Converged reference image (EXR)")->required();
+    cmd->add_option("-o,--output", so->outDir, "Output folder (default out/study-" + std::string(kind) + ")");
+    cmd->add_option("--res", so->resolution, "Resolution WIDTHxHEIGHT (the reference's)");
+    cmd->add_option("-j,--jobs", so->jobsInFlight, "Renders in flight")->check(CLI::Range(1, 1024));
+    cmd->add_option("-t,--threads", so->threads, "Threads per render (0 = all)")->check(CLI::Range(0, 4096));
+    cmd->add_flag("--quick", so->quick, "A few cheap settings (for tests)");
+    cmd->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)");
+    cmd->add_flag("--no-chart", so->noChart, "Write CSV and JSON only");
+    cmd->callback([so] { runSweepStudy(*so); });
+  }
 }
 
 }  // namespace voxcone

@@ -1,5 +1,5 @@
-// `voxcone study speed-accuracy --quick` and tools/plot_speed_accuracy.py: the study's table,
-// its Pareto fronts checked by brute force, and a chart that plots the study's numbers.
+// `voxcone study speed-accuracy / photons / levels --quick` and tools/plot_study.py: the tables,
+// speed-accuracy's Pareto fronts checked by brute force, and charts that plot the studies' numbers.
 
 #include "../support/temp_dir.h"
 #include "../support/test_scenes.h"
@@ -13,13 +13,14 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <tuple>
 
 namespace voxcone {
 namespace {
 
-class StudySpeedAccuracy : public test::TempDirTest {};
+class StudySweeps : public test::TempDirTest {};
 
-TEST_F(StudySpeedAccuracy, QuickStudyTablesFrontsAndChart) {
+TEST_F(StudySweeps, QuickStudyTablesFrontsAndChart) {
   const std::string cli = VOXCONE_CLI_PATH;
   if (!std::filesystem::exists(cli)) GTEST_SKIP() << "no CLI at " << cli;
   const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
@@ -81,6 +82,36 @@ TEST_F(StudySpeedAccuracy, QuickStudyTablesFrontsAndChart) {
   size_t lines = 0;
   for (std::string l; std::getline(csv, l);) ++lines;
   EXPECT_EQ(lines, rows.size() + 1);
+}
+
+TEST_F(StudySweeps, QuickPhotonsAndLevelsStudiesPlotTheirRows) {
+  const std::string cli = VOXCONE_CLI_PATH;
+  if (!std::filesystem::exists(cli)) GTEST_SKIP() << "no CLI at " << cli;
+  const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
+  ASSERT_EQ(std::system((cli + " render " + scene + " --res 16x16 --spp 64 -q -o " + path("ref") + " > /dev/null").c_str()), 0);
+  // (study, x key, rows: pm and voxcone at 1000 and 4000 photons; voxcone at levels 3, 4, 5)
+  for (const auto& [kind, x, expected] : {std::tuple<std::string, std::string, size_t>{"photons", "photons", 4},
+                                          {"levels", "level", 3}}) {
+    const std::string cmd = cli + " study " + kind + " " + scene + " --reference " + path("ref.exr") +
+                            " --quick --res 16x16 -j 2 -t 1 -o " + path(kind) + " > /dev/null 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << kind;
+    std::ifstream f(path(kind + "/" + kind + ".json"));
+    const nlohmann::json study = nlohmann::json::parse(f);
+    ASSERT_EQ(study["rows"].size(), expected) << kind;
+    EXPECT_GT(std::filesystem::file_size(path(kind + "/" + kind + ".png")), 10000u);
+    std::ifstream p(path(kind + "/" + kind + ".plotted.json"));
+    const nlohmann::json plotted = nlohmann::json::parse(p);
+    // Each row is plotted at its x with its MSE and relMSE (series sorted by x per method).
+    for (const nlohmann::json& r : study["rows"]) {
+      const nlohmann::json& m = plotted[r["method"].get<std::string>()];
+      bool found = false;
+      for (size_t k = 0; k < m[x].size(); ++k)
+        found = found || (m[x][k] == r[x] && m["mse"][k].get<double>() == r["mse"].get<double>() &&
+                          m["relmse"][k].get<double>() == r["relmse"].get<double>());
+      EXPECT_TRUE(found) << kind << " " << r["name"];
+      EXPECT_FALSE(r[x].is_null()) << kind << " " << r["name"];  // taken from the render's own settings
+    }
+  }
 }
 
 }  // namespace
