@@ -196,7 +196,7 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     const float level = float(m_finest) - std::log2(v / m_v0);
     const ConeSample s = m_field.coneSample(x, level, d, apex);
     const float step = m_coneStep * v;
-    // Surfaces met over this step (VoxelSample::projected): a plane adds up to exactly one
+    // Surfaces met over this step (ConeSample::density): a plane adds up to exactly one
     // crossing over the samples near it (the trilinear tents sum to one), which makes the
     // cone opaque. Occlusion accumulates linearly: the share of the cone's cross-section the
     // step's surfaces cover, up to what is still open.
@@ -219,8 +219,9 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
 
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const {
   const Material& mat = m_scene.materials[sh.material];
-  // A viewpoint on the viewer's side, two finest voxels off: clear of the surface's voxels.
-  const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (2.0f * voxel); };
+  // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
+  // cones' apex in traceCone).
+  const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kClearance * voxel); };
   if (m_view == View::Field)
     return m_field.coneSample(sh.position, float(m_finest), -woWorld, viewFrom(woWorld, m_v0)).radiance;
   Vec3 L(0.0f);

@@ -352,8 +352,9 @@ void trilinear(const Level& lv, const DVec3& origin, const Vec3& worldPos, doubl
   }
 }
 
-/// The cone's part of a trilinear lookup (VoxelField::coneSample), in float and without the
-/// normals: the 8 corners' bricks are probed once each (most lookups fall in one brick).
+/// The cone's part of a trilinear lookup (VoxelField::coneSample), in float, normals decoded
+/// only for their side (not normalized): the 8 corners' bricks are probed once each (most
+/// lookups fall in one brick).
 void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec3& d, const Vec3& localApex,
                    float& density, Vec3& radiance) {
   const Vec3 absD = glm::abs(d);

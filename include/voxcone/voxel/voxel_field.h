@@ -56,7 +56,7 @@ struct VoxelSample {
 };
 
 /// What a cone of unit direction d takes from one lookup: VoxelSample reduced to the two
-/// numbers the cone composites with, computed in float without decoding normals.
+/// numbers the cone composites with, computed in float without normalizing normals.
 struct ConeSample {
   /// dot(projected, |d|): surfaces met per finest voxel size of travel along d.
   float density = 0.0f;
