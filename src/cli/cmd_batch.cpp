@@ -145,7 +145,8 @@ std::vector<Job> expandManifest(const nlohmann::json& m, const fs::path& base) {
     Job job;
     job.spec = spec;
     if (src.contains("name")) {
-      if (!src["name"].is_string() || !std::regex_match(src["name"].get<std::string>(), std::regex("^[A-Za-z0-9._-]{1,160}$")))
+      static const std::regex kName("^[A-Za-z0-9._-]{1,160}$");
+      if (!src["name"].is_string() || !std::regex_match(src["name"].get<std::string>(), kName))
         throw SettingsError(where + ".name: letters, digits, '.', '_' and '-' only");
       job.name = src["name"].get<std::string>();
     } else {

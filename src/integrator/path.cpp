@@ -63,9 +63,7 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
 
     // Continue the path by sampling the BSDF.
     BsdfSample bs;
-    const float uc = rng.uniform();
-    const Vec2 u = rng.uniform2();
-    if (!bsdfSample(mat, wo, uc, u, bs) || isBlack(bs.weight)) break;
+    if (!bsdfSampleFrom(mat, wo, rng, bs)) break;
     beta *= bs.weight;
     specularBounce = bs.delta;
     prevPdf = bs.pdf;

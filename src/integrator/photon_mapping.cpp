@@ -134,9 +134,7 @@ Vec3 PhotonMappingIntegrator::gather(Ray ray, Rng& rng, int depth) const {
     if (depth + 1 >= m_maxDepth) break;
     const Frame frame(sh.shadingNormal);
     BsdfSample bs;
-    const float uc = rng.uniform();
-    const Vec2 u = rng.uniform2();
-    if (!bsdfSample(mat, frame.toLocal(woWorld), uc, u, bs) || isBlack(bs.weight)) break;
+    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), rng, bs)) break;
     beta *= bs.weight;
     countEmission = seenGlossy && bs.delta;
     ray = spawnRay(pos, sh.geomNormal, frame.toWorld(bs.wi));
@@ -191,9 +189,7 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
     // Delta or glossy bounce: sample the BSDF with the pixel's stream.
     const Frame frame(sh.shadingNormal);
     BsdfSample bs;
-    const float uc = rng.uniform();
-    const Vec2 u = rng.uniform2();
-    if (!bsdfSample(mat, frame.toLocal(woWorld), uc, u, bs) || isBlack(bs.weight)) break;
+    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), rng, bs)) break;
     beta *= bs.weight;
     countEmission = bs.delta;
     ray = spawnRay(pos, sh.geomNormal, frame.toWorld(bs.wi));

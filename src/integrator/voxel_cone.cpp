@@ -136,10 +136,9 @@ std::optional<VoxelConeIntegrator::AxisHit> VoxelConeIntegrator::hitAlongAxis(co
   return out;
 }
 
-ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const {
-  ConeResult res;
+Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const {
   const float cosPhi = glm::dot(n, d);
-  if (!(cosPhi > 0.0f)) return res;  // below the tangent plane: nothing to gather
+  if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
   // The point the lookups' voxels are seen from (each shows the side of its surface facing
   // it): the apex lifted clear of its own surface's finest voxels, whose centres lie up to
@@ -153,12 +152,10 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, n, d, m_maxDistance);
-    if (!hit) return res;
+    if (!hit) return Vec3(0.0f);
     const float v = std::clamp(hit->t * tanHalf, m_v0, vMax);
-    res.radiance =
-        m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex).radiance;
-    res.occlusion = 1.0f;
-    return res;
+    return m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
+        .radiance;
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
@@ -208,13 +205,9 @@ ConeResult VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Ve
     }
     t += step;
   }
-  if (hitSurface && A < 1.0f) {
-    C += (1.0f - A) * hitRadiance;
-    A = 1.0f;
-  }
-  res.radiance = C;
-  res.occlusion = A;
-  return res;
+  // The exact hit covers what the march left open.
+  if (hitSurface && A < 1.0f) C += (1.0f - A) * hitRadiance;
+  return C;
 }
 
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const {
@@ -246,22 +239,20 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
           Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
       const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
       if (isBlack(f)) continue;
-      L += f * cone.weight * traceCone(sh.position, ng, d, m_tanHalf).radiance;
+      L += f * cone.weight * traceCone(sh.position, ng, d, m_tanHalf);
     }
     return L;
   }
   if (m_view == View::Caustic) return L;
   // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
   BsdfSample bs;
-  const float uc = rng.uniform();
-  const Vec2 u = rng.uniform2();
-  if (!bsdfSample(mat, wo, uc, u, bs) || isBlack(bs.weight)) return L;
+  if (!bsdfSampleFrom(mat, wo, rng, bs)) return L;
   const Vec3 d = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
   // Roughness is in (0, 1]. Below 0.01 the cone would stay one finest voxel wide for over 100
   // steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
-  L += bs.weight * traceCone(sh.position, side, d, tanHalf).radiance;
+  L += bs.weight * traceCone(sh.position, side, d, tanHalf);
   return L;
 }
 

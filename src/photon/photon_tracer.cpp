@@ -95,9 +95,7 @@ void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lig
     const Frame frame(sh.shadingNormal);
     const Vec3 wo = frame.toLocal(woWorld);
     BsdfSample bs;
-    const float uc = rng.uniform();
-    const Vec2 u = rng.uniform2();
-    if (!bsdfSample(mat, wo, uc, u, bs, TransportMode::Importance) || isBlack(bs.weight)) return;
+    if (!bsdfSampleFrom(mat, wo, rng, bs, TransportMode::Importance)) return;
     Vec3 newPower = power * bs.weight;
     if (!bs.delta) {
       specularOnly = false;

@@ -50,4 +50,21 @@ inline size_t pixelsDifferingAcrossThreads(const Scene& scene, const std::string
 /// The canonical Cornell box of data/scenes.
 inline Scene cornellBox() { return loadScene(sourceDir() + "/data/scenes/cornell-box.json"); }
 
+/// Image means of cornell-box at 32x32: `method` with `options` at 16 spp, and path tracing at
+/// 1024 spp (the converged value the other methods are held to).
+struct CornellMeans {
+  Vec3 method, path;
+};
+inline CornellMeans cornellBoxMeans(const std::string& method, const nlohmann::json& options) {
+  const Scene scene = cornellBox();
+  RenderSettings s = scene.render;
+  s.width = s.height = 32;
+  s.spp = 1024;
+  CornellMeans m;
+  m.path = imageMean(renderWith(scene, "path", s).image);
+  s.spp = 16;
+  m.method = imageMean(renderWith(scene, method, s, options).image);
+  return m;
+}
+
 }  // namespace voxcone::test

@@ -79,12 +79,6 @@
 
 namespace voxcone {
 
-/// Radiance and opacity a cone gathered.
-struct ConeResult {
-  Vec3 radiance{0.0f};
-  float occlusion = 0.0f;  ///< accumulated opacity A
-};
-
 class VoxelConeIntegrator final : public Integrator {
 public:
   explicit VoxelConeIntegrator(const IntegratorContext& context);
@@ -94,15 +88,12 @@ public:
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
-  /// Use a field built elsewhere instead of prepare() (tests, studies that share a field).
-  void setField(VoxelField field);
-  const VoxelField& field() const { return m_field; }
-
-  /// March one cone from surface point p (unit normal n on the side the cone leaves, unit
-  /// direction d with dot(n, d) > 0 expected) of half-angle atan(tanHalf). Public for tests.
-  ConeResult traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const;
-
 private:
+  /// Take the field prepare() built and the sizes the cones use from it.
+  void setField(VoxelField field);
+  /// The radiance one cone gathers from surface point p (unit normal n on the side the cone
+  /// leaves, unit direction d with dot(n, d) > 0 expected), half-angle atan(tanHalf).
+  Vec3 traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const;
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const;
   /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
   /// the hit surface's normal turned towards the ray's side.

@@ -12,6 +12,7 @@
 /// - Values returned by bsdfEval are f(wo, wi) WITHOUT the cosine factor.
 
 #include "voxcone/core/math.h"
+#include "voxcone/core/rng.h"
 #include "voxcone/scene/material.h"
 
 namespace voxcone {
@@ -36,6 +37,11 @@ float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi);
 /// (e.g. wo grazing, sample below the horizon).
 bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, BsdfSample& out,
                 TransportMode mode = TransportMode::Radiance);
+
+/// bsdfSample with uc, then u, drawn from `rng` (the order every caller keeps, so images stay
+/// the same); false also when the sample carries no weight.
+bool bsdfSampleFrom(const Material& m, const Vec3& wo, Rng& rng, BsdfSample& out,
+                    TransportMode mode = TransportMode::Radiance);
 
 /// A deterministic lobe of a delta material (for Whitted-style splitting).
 struct DeltaLobe {
