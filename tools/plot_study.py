@@ -8,6 +8,10 @@ usage: plot_study.py STUDY.json OUT_STEM
 - photons: MSE and PSNR against photon count, pm and voxcone (the study we compare with went
   from 1000 to 5000 photons; the reference here is converged path tracing).
 - levels: voxcone's time, voxel-field memory and error against voxel level.
+- structures: per mesh, build time, memory and render time of each acceleration structure
+  (bars, log scale), the ratio to the HBVH written on each bar.
+- scaling: speedup against thread count (with the ideal line) and build / render time against
+  triangle count (log-log, with the fitted exponent).
 Writes OUT_STEM.png, OUT_STEM.svg and OUT_STEM.plotted.json (the exact series drawn, for the
 tests). Debian's /usr/bin/python3 with python3-matplotlib.
 """
@@ -93,13 +97,95 @@ def plot_levels(study, stem):
     return fig, s
 
 
+ACCEL_COLOURS = {"hbvh": "tab:blue", "bvh": "tab:orange", "kdtree": "tab:green"}
+
+
+def plot_structures(study):
+    meshes = []
+    for r in study["rows"]:
+        if r["mesh"] not in meshes:
+            meshes.append(r["mesh"])
+    accels = []
+    for r in study["rows"]:
+        if r["accel"] not in accels:
+            accels.append(r["accel"])
+    s = {}
+    for a in accels:
+        rows = {r["mesh"]: r for r in study["rows"] if r["accel"] == a}
+        s[a] = {k: [rows[m][k] if m in rows else None for m in meshes]
+                for k in ("triangles", "build_s", "accel_mb", "render_s")}
+    s["meshes"] = meshes
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    width = 0.8 / max(1, len(accels))
+    for ax, key, label in zip(axes, ("build_s", "accel_mb", "render_s"),
+                              ("build time (s)", "structure memory (MB)", "render time (s)")):
+        for i, a in enumerate(accels):
+            xs = [j + (i - (len(accels) - 1) / 2) * width for j in range(len(meshes))]
+            vals = [v if v is not None else math.nan for v in s[a][key]]
+            ax.bar(xs, vals, width, color=ACCEL_COLOURS.get(a, "gray"), label=a)
+            base = s.get("hbvh", {}).get(key)
+            if base:
+                for x, v, b in zip(xs, vals, base):
+                    if b and v == v:
+                        ax.text(x, v, "%.2fx" % (v / b), ha="center", va="bottom", fontsize=7)
+        ax.set_xticks(range(len(meshes)))
+        ax.set_xticklabels(["%s\n%s tris" % (m, "{:,}".format(int(t)) if t else "?")
+                            for m, t in zip(meshes, s[accels[0]]["triangles"])], fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("acceleration structures: %s, %s spp, %s (ratios to the HBVH)"
+                 % (study.get("method", ""), study.get("spp", ""), study.get("res", "")), fontsize=10)
+    return fig, s
+
+
+def plot_scaling(study):
+    s = {"threads": {}, "triangles": {}, "triangle_exponents": study.get("triangle_exponents", {})}
+    for r in sorted(study["threads"], key=lambda r: (r["method"], r["threads"])):
+        m = s["threads"].setdefault(r["method"], {"threads": [], "total_s": [], "speedup": []})
+        m["threads"].append(r["threads"])
+        m["total_s"].append(r["total_s"])
+        m["speedup"].append(r.get("speedup"))
+    for r in sorted(study["triangles"], key=lambda r: (r["method"], r["triangles"])):
+        m = s["triangles"].setdefault(r["method"], {"triangles": [], "build_s": [], "render_s": [], "total_s": []})
+        for k in m:
+            m[k].append(r[k])
+    fig, (ax_t, ax_n) = plt.subplots(1, 2, figsize=(11, 4.2))
+    tmax = 1
+    for method, m in sorted(s["threads"].items()):
+        c = COLOURS.get(method, "black")
+        ax_t.plot(m["threads"], [v if v is not None else math.nan for v in m["speedup"]], "o-", color=c, label=method)
+        tmax = max([tmax] + m["threads"])
+    ax_t.plot([1, tmax], [1, tmax], "--", color="gray", lw=1, label="ideal")
+    ax_t.set_xlabel("threads (machine: %s hardware threads)" % study.get("hardware_threads", "?"))
+    ax_t.set_ylabel("speedup of the total time over 1 thread")
+    ax_t.set_title(study.get("scene", ""), fontsize=9)
+    for method, m in sorted(s["triangles"].items()):
+        c = COLOURS.get(method, "black")
+        k = s["triangle_exponents"].get(method, {})
+        ax_n.plot(m["triangles"], m["render_s"], "o-", color=c,
+                  label="%s render (k=%.2f)" % (method, k.get("render") or math.nan))
+        ax_n.plot(m["triangles"], m["build_s"], "s--", color=c, alpha=0.6,
+                  label="%s structure build (k=%.2f)" % (method, k.get("build") or math.nan))
+    ax_n.set_xscale("log")
+    ax_n.set_yscale("log")
+    ax_n.set_xlabel("triangles (generated knot in the Cornell room)")
+    ax_n.set_ylabel("time (s); time ~ triangles^k")
+    for ax in (ax_t, ax_n):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("scaling: threads and triangles", fontsize=10)
+    return fig, s
+
+
 def main(argv):
     if len(argv) != 3:
         print(__doc__.strip().splitlines()[2], file=sys.stderr)
         return 2
     with open(argv[1]) as f:
         study = json.load(f)
-    if not study["rows"]:
+    if not study.get("rows", study.get("threads")):
         print("plot_study.py: no successful renders to plot", file=sys.stderr)
         return 1
     kind = study.get("study", "speed-accuracy")
@@ -107,6 +193,10 @@ def main(argv):
         fig, s = plot_photons(study, argv[2])
     elif kind == "levels":
         fig, s = plot_levels(study, argv[2])
+    elif kind == "structures":
+        fig, s = plot_structures(study)
+    elif kind == "scaling":
+        fig, s = plot_scaling(study)
     else:
         fig, s = plot_speed_accuracy(study)
     fig.tight_layout()

@@ -260,19 +260,9 @@ struct Hbvh::Flattener {
         // Pack the leaf's triangles four to a packet; NaN vertices fill the unused lanes.
         const uint32_t first = static_cast<uint32_t>(bvh.m_tris.size());
         const uint32_t count = (c.count + 3u) / 4u;
-        for (uint32_t p = 0; p < count; ++p) {
-          Triangle4 t4;
-          for (int lane = 0; lane < 4; ++lane) {
-            const uint32_t j = c.first + 4 * p + static_cast<uint32_t>(lane);
-            const bool used = j < c.first + c.count;
-            t4.id[lane] = used ? refs[j].id : 0u;
-            for (int vtx = 0; vtx < 3; ++vtx) {
-              const Vec3 v = used ? pos[tris[refs[j].id][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
-              for (int a = 0; a < 3; ++a) t4.v[vtx][a][lane] = v[a];
-            }
-          }
-          bvh.m_tris.push_back(t4);
-        }
+        uint32_t ids[64];  // maxLeafSize <= 64
+        for (uint32_t j = 0; j < c.count; ++j) ids[j] = refs[c.first + j].id;
+        packTriangles(pos, tris, ids, c.count, bvh.m_tris);
         node.child[i] = kLeafBit | ((count - 1u) << kCountShift) | first;
         ++leaves;
       } else {
@@ -403,11 +393,10 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (progress) progress->finish();
 }
 
-bool intersectSurface(const Scene& scene, const Hbvh& accel, const Ray& ray, SurfaceHit& out) {
-  const std::optional<Hit> hit = accel.intersect(ray);
-  if (!hit) return false;
-  out = scene.surfaceAt(hit->triangle, ray.at(hit->t), hit->b1, hit->b2);
-  return true;
+nlohmann::json Hbvh::statsJson() const {
+  nlohmann::json j = m_stats.toJson();
+  j["kind"] = kind();
+  return j;
 }
 
 }  // namespace voxcone

@@ -3,12 +3,16 @@
 #include "cli_util.h"
 
 #include "voxcone/core/error.h"
+#include "voxcone/image/image_io.h"
+
+#include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
 
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 
 namespace voxcone {
 
@@ -33,6 +37,30 @@ std::string selfExe() {
   const auto p = std::filesystem::read_symlink("/proc/self/exe", ec);
   if (ec) throw Error("cannot locate the voxcone executable");
   return p.string();
+}
+
+nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& outDir, int jobsInFlight,
+                             int threadsPerJob) {
+  std::filesystem::create_directories(outDir);
+  const std::string manifestPath = outDir + "/manifest.json";
+  writeJsonAtomic(manifestPath, manifest);
+  std::string out;
+  const std::string cmd = shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
+                          shellQuote(outDir + "/runs") + " -j " + std::to_string(jobsInFlight) + " -t " +
+                          std::to_string(threadsPerJob) + " 2>&1";
+  const int code = runCapture(cmd, out);
+  if (code != 0 && code != 1) throw Error("batch failed: " + out.substr(0, out.find('\n')));
+  std::ifstream f(outDir + "/runs/results.json");
+  if (!f) throw Error("batch wrote no " + outDir + "/runs/results.json");
+  return nlohmann::json::parse(f);
+}
+
+void runChartScript(const std::string& script, const std::string& studyJson, const std::string& outStem) {
+  std::string out;
+  const std::string cmd = "/usr/bin/python3 " + shellQuote(script) + " " + shellQuote(studyJson) + " " +
+                          shellQuote(outStem) + " 2>&1";
+  if (runCapture(cmd, out) != 0) throw Error("chart script failed: " + out.substr(0, out.find('\n')));
+  std::printf("%s", out.c_str());
 }
 
 }  // namespace voxcone

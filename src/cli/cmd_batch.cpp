@@ -44,7 +44,8 @@ struct BatchOptions {
 };
 
 /// Keys a job (or a grid entry, or the defaults) may set.
-const std::set<std::string> kJobKeys = {"name", "scene", "method", "spp", "res", "seed", "max_depth", "options", "reference"};
+const std::set<std::string> kJobKeys = {"name",    "scene",   "method", "spp",   "res",      "seed",
+                                        "max_depth", "options", "accel",  "threads", "reference"};
 
 /// One render of the batch.
 struct Job {
@@ -92,6 +93,8 @@ std::string jobName(const nlohmann::json& spec) {
   std::string name = fs::path(spec["scene"].get<std::string>()).stem().string();
   if (spec.contains("method")) name += "_" + slug(spec["method"]);
   if (spec.contains("spp")) name += "_spp" + slug(spec["spp"]);
+  if (spec.contains("accel")) name += "_" + slug(spec["accel"]);
+  if (spec.contains("threads")) name += "_t" + slug(spec["threads"]);
   for (const auto& [key, value] : spec["options"].items()) name += "_" + slug(key) + slug(value);
   if (name.size() > 120) name.resize(120);
   char hash[17];
@@ -119,8 +122,9 @@ void applySpec(nlohmann::json& spec, const nlohmann::json& src, const fs::path& 
 void validateSpec(const nlohmann::json& spec, const std::string& where) {
   if (!spec.contains("scene")) throw SettingsError(where + ": no scene (give one in the job or in defaults)");
   auto isInt = [&](const char* k) { return !spec.contains(k) || spec[k].is_number_integer(); };
-  if (!isInt("spp") || !isInt("seed") || !isInt("max_depth"))
-    throw SettingsError(where + ": spp, seed and max_depth must be integers");
+  if (!isInt("spp") || !isInt("seed") || !isInt("max_depth") || !isInt("threads"))
+    throw SettingsError(where + ": spp, seed, max_depth and threads must be integers");
+  if (spec.contains("accel") && !spec["accel"].is_string()) throw SettingsError(where + ".accel: expected a string");
   if (spec.contains("method") && !spec["method"].is_string()) throw SettingsError(where + ".method: expected a string");
   if (spec.contains("res") && !spec["res"].is_string()) throw SettingsError(where + ".res: expected WIDTHxHEIGHT");
 }
@@ -232,13 +236,15 @@ JobResult runJob(const Job& job, const fs::path& outDir, const BatchOptions& o) 
   if (o.memoryBudgetMb > 0.0)  // the data segment and private writable mappings: the heap
     cmd += "ulimit -d " + std::to_string(static_cast<long long>(o.memoryBudgetMb * 1024.0)) + " && ";
   cmd += "exec " + shellQuote(selfExe()) + " render " + shellQuote(s["scene"].get<std::string>()) + " -q -o " +
-         shellQuote((outDir / job.name).string()) + " -t " + std::to_string(o.threadsPerJob) + " --options " +
+         shellQuote((outDir / job.name).string()) + " -t " +
+         std::to_string(s.contains("threads") ? s["threads"].get<int64_t>() : int64_t(o.threadsPerJob)) + " --options " +
          shellQuote(s["options"].dump());
   if (s.contains("method")) cmd += " --method " + shellQuote(s["method"].get<std::string>());
   if (s.contains("spp")) cmd += " --spp " + std::to_string(s["spp"].get<int64_t>());
   if (s.contains("res")) cmd += " --res " + shellQuote(s["res"].get<std::string>());
   if (s.contains("seed")) cmd += " --seed " + std::to_string(s["seed"].get<int64_t>());
   if (s.contains("max_depth")) cmd += " --max-depth " + std::to_string(s["max_depth"].get<int64_t>());
+  if (s.contains("accel")) cmd += " --accel " + shellQuote(s["accel"].get<std::string>());
   cmd += " 2>&1";
   std::string out;
   const int code = runCapture(cmd, out);
@@ -305,6 +311,10 @@ nlohmann::json resultRow(const Job& job, const JobResult& r) {
     row["integrator"] = st.value("integrator", nlohmann::json::object());
     const nlohmann::json::json_pointer fieldBytes("/stats/integrator/field_bytes");
     if (r.sidecar.contains(fieldBytes)) row["field_bytes"] = r.sidecar[fieldBytes];
+    row["threads_used"] = st.value("threads", nlohmann::json());
+    const nlohmann::json stats = r.sidecar.value("stats", nlohmann::json::object());
+    row["accel_stats"] = stats.value("accel", nlohmann::json::object());
+    row["triangles"] = stats.value("scene", nlohmann::json::object()).value("triangles", nlohmann::json());
     row["outputs"] = r.sidecar.value("outputs", nlohmann::json::object());
   }
   if (!r.metrics.is_null()) row["metrics"] = r.metrics;
@@ -318,7 +328,7 @@ void writeTables(const std::vector<nlohmann::json>& rows, const std::string& ste
   writeFileAtomic(stem + ".csv", [&](const std::string& tmp) {
     std::ofstream f(tmp);
     f << "name,scene,method,spp,width,height,seed,options,status,error,load_s,build_s,prepare_s,render_s,total_s,"
-         "peak_rss_mb,field_mb,reference,relmse,mse,psnr_srgb8,ssim\n";
+         "peak_rss_mb,field_mb,accel,accel_mb,threads,reference,relmse,mse,psnr_srgb8,ssim\n";
     using P = nlohmann::json::json_pointer;
     for (const nlohmann::json& r : rows) {
       f << csvField(r["name"]) << "," << csvField(r["scene"]) << ","
@@ -328,7 +338,10 @@ void writeTables(const std::vector<nlohmann::json>& rows, const std::string& ste
         << "," << csvNumber(r, P("/timings/load_seconds")) << "," << csvNumber(r, P("/timings/build_seconds")) << ","
         << csvNumber(r, P("/timings/prepare_seconds")) << "," << csvNumber(r, P("/timings/render_seconds")) << ","
         << csvNumber(r, P("/timings/total_seconds")) << "," << csvNumber(r, P("/peak_rss_bytes"), 1e-6) << ","
-        << csvNumber(r, P("/field_bytes"), 1e-6) << "," << csvField(r.value("reference", "")) << ","
+        << csvNumber(r, P("/field_bytes"), 1e-6) << ","
+        << csvField(r.value("accel_stats", nlohmann::json::object()).value("kind", "")) << ","
+        << csvNumber(r, P("/accel_stats/bytes"), 1e-6) << "," << csvNumber(r, P("/threads_used")) << ","
+        << csvField(r.value("reference", "")) << ","
         << csvNumber(r, P("/metrics/relmse")) << "," << csvNumber(r, P("/metrics/mse")) << ","
         << csvNumber(r, P("/metrics/psnr_srgb8")) << "," << csvNumber(r, P("/metrics/ssim")) << "\n";
     }

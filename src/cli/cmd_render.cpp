@@ -1,8 +1,8 @@
-// `voxcone render SCENE`: load, build the HBVH, render, write EXR + PNG + JSON sidecar.
+// `voxcone render SCENE`: load, build the HBVH (or --accel), render, write EXR + PNG + JSON sidecar.
 
 #include "commands.h"
 #include "default_scene.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/core/timer.h"
@@ -28,6 +28,7 @@ struct RenderOptions {
   int threads = 0;
   int maxDepth = 0;
   std::string integratorOptions = "{}";
+  std::string accel = "hbvh";
   bool quiet = false;
 };
 
@@ -85,10 +86,10 @@ void runRender(const RenderOptions& o) {
     }
 
   t.reset();
-  const Hbvh accel(scene, HbvhBuildSettings{}, &progress);
+  const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
   const double buildSec = t.seconds();
 
-  IntegratorContext ctx{scene, accel, settings, options};
+  IntegratorContext ctx{scene, *accel, settings, options};
   std::unique_ptr<Integrator> integrator = createIntegrator(settings.method, ctx);
   t.reset();
   integrator->prepare(&progress);
@@ -106,7 +107,7 @@ void runRender(const RenderOptions& o) {
   meta["seed"] = settings.seed;
   meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"prepare_seconds", prepareSec},
                      {"render_seconds", result.seconds}};
-  meta["stats"] = {{"scene", scene.statsJson()}, {"hbvh", accel.stats().toJson()},
+  meta["stats"] = {{"scene", scene.statsJson()}, {"accel", accel->statsJson()},
                    {"integrator", integrator->statsJson()},
                    {"samples", result.samples}, {"invalid_samples", result.invalidSamples}};
 
@@ -140,6 +141,8 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024));
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");
+  cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres) or kdtree")
+      ->check(CLI::IsMember(accelKinds()));
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

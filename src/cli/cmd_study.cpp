@@ -117,12 +117,7 @@ void runStudyMemory(const StudyOptions& o) {
                 r["peak_rss_bytes"].get<double>() / 1e6);
   }
   std::printf("wrote %s, %s\n", csvPath.c_str(), jsonPath.c_str());
-  if (o.noChart) return;
-  std::string out;
-  const std::string cmd = "/usr/bin/python3 " + shellQuote(o.plotScript) + " " + shellQuote(jsonPath) + " " +
-                          shellQuote(o.outDir + "/memory") + " 2>&1";
-  if (runCapture(cmd, out) != 0) throw Error("chart script failed: " + out.substr(0, out.find('\n')));
-  std::printf("%s", out.c_str());
+  if (!o.noChart) runChartScript(o.plotScript, jsonPath, o.outDir + "/memory");
 }
 
 /// A study that is a batch of renders against a reference: speed-accuracy, photons or levels.
@@ -207,18 +202,8 @@ double onFront(const std::vector<std::pair<double, double>>& front, double x) {
 void runSweepStudy(const SweepOptions& o) {
   if (!fs::exists(o.scenePath)) throw SettingsError("scene file not found: " + o.scenePath);
   if (!fs::exists(o.referencePath)) throw SettingsError("reference image not found: " + o.referencePath);
-  fs::create_directories(o.outDir);
-  const std::string manifestPath = o.outDir + "/manifest.json";
-  writeJsonAtomic(manifestPath, sweepManifest(o));
-  // The renders are a batch (resumable: finished jobs are kept); failed jobs are tabled.
-  std::string out;
-  const std::string cmd = shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
-                          shellQuote(o.outDir + "/runs") + " -j " + std::to_string(o.jobsInFlight) + " -t " +
-                          std::to_string(o.threads) + " 2>&1";
-  const int code = runCapture(cmd, out);
-  if (code != 0 && code != 1) throw Error("batch failed: " + out.substr(0, out.find('\n')));
-  std::ifstream f(o.outDir + "/runs/results.json");
-  const nlohmann::json results = nlohmann::json::parse(f);
+  // The renders are a batch (resumable: finished jobs are kept); failed jobs are left out.
+  const nlohmann::json results = runStudyBatch(sweepManifest(o), o.outDir, o.jobsInFlight, o.threads);
 
   // One row per successful render; the Pareto front of each method in (time, relMSE).
   nlohmann::json rows = nlohmann::json::array();
@@ -308,12 +293,7 @@ void runSweepStudy(const SweepOptions& o) {
     }
   }
   std::printf("wrote %s.csv, %s.json\n", stem.c_str(), stem.c_str());
-  if (o.noChart) return;
-  std::string plotOut;
-  const std::string plot = "/usr/bin/python3 " + shellQuote(o.plotScript) + " " + shellQuote(stem + ".json") + " " +
-                           shellQuote(stem) + " 2>&1";
-  if (runCapture(plot, plotOut) != 0) throw Error("chart script failed: " + plotOut.substr(0, plotOut.find('\n')));
-  std::printf("%s", plotOut.c_str());
+  if (!o.noChart) runChartScript(o.plotScript, stem + ".json", stem);
 }
 
 }  // namespace
@@ -352,6 +332,7 @@ void addStudyCommand(CLI::App& app) {
     cmd->add_flag("--no-chart", so->noChart, "Write CSV and JSON only");
     cmd->callback([so] { runSweepStudy(*so); });
   }
+  addStructureStudies(*study);
 }
 
 }  // namespace voxcone

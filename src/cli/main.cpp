@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   voxcone::addVoxelizeCommand(app);
   voxcone::addStudyCommand(app);
   voxcone::addBatchCommand(app);
+  voxcone::addGenerateCommand(app);
   voxcone::installInterruptHandler();
   try {
     app.parse(argc, argv);

@@ -2,7 +2,7 @@
 // Whitted-style specular chains, shared by the whitted and voxcone integrators (private to
 // src/integrator).
 
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
@@ -16,7 +16,7 @@ namespace voxcone {
 /// channel of the product of lobe weights) falls below 1/1000 are dropped: they cannot change
 /// the pixel visibly.
 template <typename Shade>
-Vec3 traceDeltaChains(const Scene& scene, const Hbvh& accel, const Ray& ray, Rng& rng, int maxDepth,
+Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Rng& rng, int maxDepth,
                       bool withEmission, const Shade& shade, int depth = 0, float throughput = 1.0f) {
   SurfaceHit sh;
   if (!intersectSurface(scene, accel, ray, sh)) return Vec3(0.0f);

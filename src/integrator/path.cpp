@@ -1,7 +1,7 @@
 #include "voxcone/integrator/path.h"
 
 #include "options.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/sampling.h"
 #include "voxcone/scene/bsdf.h"
 

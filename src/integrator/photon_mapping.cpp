@@ -3,7 +3,7 @@
 #include "voxcone/integrator/photon_mapping.h"
 
 #include "options.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/sampling.h"
 #include "voxcone/integrator/whitted.h"

@@ -4,7 +4,7 @@
 
 #include "delta_chain.h"
 #include "options.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/integrator/whitted.h"

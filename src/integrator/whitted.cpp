@@ -2,7 +2,7 @@
 
 #include "delta_chain.h"
 #include "options.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/scene/bsdf.h"
 
 namespace voxcone {
@@ -18,7 +18,7 @@ nlohmann::json WhittedIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"light_samples", m_lightSamples}};
 }
 
-Vec3 estimateDirectLight(const Scene& scene, const Hbvh& accel, const SurfaceHit& hit, const Vec3& woWorld, Rng& rng,
+Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Rng& rng,
                          int samples) {
   const Material& mat = scene.materials[hit.material];
   const Frame frame(hit.shadingNormal);

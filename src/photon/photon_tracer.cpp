@@ -5,7 +5,7 @@
 #include "voxcone/photon/photon_tracer.h"
 
 #include "light_emission.h"
-#include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/scene/bsdf.h"
@@ -41,7 +41,7 @@ enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 
 /// Trace photon `index` of `pass` and append what it stores to `out`. `powerScale` is one over
 /// the photons emitted in the pass, so that each pass carries the lights' full flux.
-void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lights, const PhotonSettings& settings,
+void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
                  Pass pass, uint64_t index, double powerScale, std::vector<Photon>& out) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
@@ -120,7 +120,7 @@ void tracePhoton(const Scene& scene, const Hbvh& accel, const LightEmission& lig
 
 }  // namespace
 
-PhotonMaps tracePhotons(const Scene& scene, const Hbvh& accel, const PhotonSettings& settings, Progress* progress) {
+PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSettings& settings, Progress* progress) {
   const auto t0 = std::chrono::steady_clock::now();
   Progress nullProgress;
   Progress& prog = progress ? *progress : nullProgress;

@@ -1,8 +1,11 @@
-// The HBVH against brute force: closest hits and occlusion on over a million random rays over
-// several meshes, including rays aimed exactly at vertices and edges.
+// The HBVH, the plain BVH and the kd-tree against brute force: closest hits and occlusion on
+// over a million random rays over several meshes, including rays aimed exactly at vertices and
+// edges.
 
 #include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/kdtree.h"
 #include "voxcone/accel/triangle.h"
+#include "voxcone/core/error.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/core/sampling.h"
@@ -15,6 +18,7 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <functional>
 
 namespace voxcone {
 namespace {
@@ -112,7 +116,37 @@ Ray makeRay(const Soup& s, const Bounds3& b, Rng& rng) {
 /// brute force and the HBVH may keep different ones.
 bool sameHitDistance(float a, float b) { return std::fabs(a - b) <= 1e-5f * std::max(1.0f, std::fabs(a)); }
 
-TEST(Hbvh, MatchesBruteForceOnOverAMillionRays) {
+/// The structures under test, each with settings that stress it.
+struct Variant {
+  std::string name;
+  std::function<std::unique_ptr<Accel>(const Soup&)> build;
+};
+
+std::vector<Variant> variants() {
+  auto hbvh = [](float ratio, int leaf) {
+    return [=](const Soup& s) {
+      HbvhBuildSettings settings;
+      settings.sphereAreaRatio = ratio;
+      settings.maxLeafSize = leaf;
+      return std::unique_ptr<Accel>(std::make_unique<Hbvh>(s.pos, s.tris, settings));
+    };
+  };
+  auto kd = [](int bins, int leaf, float isect) {
+    return [=](const Soup& s) {
+      KdTreeBuildSettings settings;
+      settings.binCount = bins;
+      settings.maxLeafSize = leaf;
+      settings.intersectionCost = isect;
+      return std::unique_ptr<Accel>(std::make_unique<KdTree>(s.pos, s.tris, settings));
+    };
+  };
+  // A plain AABB BVH, the hybrid, spheres on every node with small leaves; the kd-tree as
+  // built by default and pushed to deep trees of many straddling references.
+  return {{"bvh", hbvh(0.0f, 8)},         {"hbvh", hbvh(1.0f, 8)},        {"hbvh-all-spheres", hbvh(100.0f, 2)},
+          {"kdtree", kd(32, 8, 1.0f)},    {"kdtree-deep", kd(7, 1, 20.0f)}};
+}
+
+TEST(Accel, EveryStructureMatchesBruteForceOnOverAMillionRays) {
   const std::vector<Soup> soups = {sphereSoup(3), randomSoup(400, 7), gridSoup(14), cornellSoup()};
   constexpr int kRaysPerMesh = 1 << 18;
   uint64_t total = 0, hits = 0;
@@ -131,40 +165,37 @@ TEST(Hbvh, MatchesBruteForceOnOverAMillionRays) {
     });
     for (const auto& h : ref) hits += h.has_value();
     total += kRaysPerMesh;
-    // A plain AABB BVH, the hybrid, and spheres on every node with small leaves.
-    for (float ratio : {0.0f, 1.0f, 100.0f}) {
-      HbvhBuildSettings settings;
-      settings.sphereAreaRatio = ratio;
-      settings.maxLeafSize = ratio == 100.0f ? 2 : 8;
-      const Hbvh bvh(s.pos, s.tris, settings);
+    for (const Variant& v : variants()) {
+      const std::unique_ptr<Accel> accel = v.build(s);
       std::atomic<uint64_t> closest{0}, occlusion{0};
       tbb::parallel_for(0, kRaysPerMesh / 1024, [&](int block) {
         Rng rng(43, uint64_t(block));
         for (int i = block * 1024; i < (block + 1) * 1024; ++i) {
           const Ray& r = rays[i];
-          const auto got = bvh.intersect(r);
+          const auto got = accel->intersect(r);
           if (ref[i].has_value() != got.has_value() || (got && !sameHitDistance(ref[i]->t, got->t))) {
             ++closest;
           }
           // Occlusion up to tOcc: something lies in (tMin, tOcc) exactly when the closest hit does.
           const float tOcc = ref[i] ? ref[i]->t * (0.5f + rng.uniform()) : r.tMax;
           if (ref[i] && sameHitDistance(ref[i]->t, tOcc)) continue;
-          if (bvh.occluded(r, tOcc) != (ref[i] && ref[i]->t < tOcc)) ++occlusion;
+          if (accel->occluded(r, tOcc) != (ref[i] && ref[i]->t < tOcc)) ++occlusion;
         }
       });
-      EXPECT_EQ(closest.load(), 0u) << s.name << " sphereAreaRatio " << ratio;
-      EXPECT_EQ(occlusion.load(), 0u) << s.name << " sphereAreaRatio " << ratio;
+      EXPECT_EQ(closest.load(), 0u) << s.name << " " << v.name;
+      EXPECT_EQ(occlusion.load(), 0u) << s.name << " " << v.name;
     }
   }
   EXPECT_GE(total, 1000000u);
   EXPECT_GT(hits, total / 4);  // the ray sets really hit the meshes
 }
 
-TEST(Hbvh, ClosedMeshIsWatertightThroughVerticesAndEdges) {
+TEST(Accel, ClosedMeshIsWatertightThroughVerticesAndEdges) {
   // Every ray from the centre of a closed sphere must hit it, also when aimed exactly at a
   // vertex or an edge point (no crack between triangles).
   const Soup s = sphereSoup(4);
-  const Hbvh bvh(s.pos, s.tris);
+  for (const Variant& v : variants()) {
+  const std::unique_ptr<Accel> bvh = v.build(s);
   Rng rng(3, 0);
   int misses = 0, rays = 0;
   for (size_t t = 0; t < s.tris.size(); ++t) {
@@ -176,11 +207,12 @@ TEST(Hbvh, ClosedMeshIsWatertightThroughVerticesAndEdges) {
       r.origin = Vec3(0.01f, -0.02f, 0.015f);
       r.dir = target - r.origin;
       ++rays;
-      if (!bvh.intersect(r)) ++misses;
-      if (!bvh.occluded(r)) ++misses;
+      if (!bvh->intersect(r)) ++misses;
+      if (!bvh->occluded(r)) ++misses;
     }
   }
-  EXPECT_EQ(misses, 0) << "of " << rays << " rays";
+  EXPECT_EQ(misses, 0) << v.name << ": of " << rays << " rays";
+  }
 }
 
 TEST(Hbvh, StatsAreConsistent) {
@@ -228,20 +260,70 @@ TEST(Hbvh, BuildIsIdenticalAtAnyThreadCount) {
   }
 }
 
-TEST(Hbvh, EmptyAndDegenerateInput) {
-  const Hbvh empty(std::vector<Vec3>{}, std::vector<UVec3>{});
-  Ray r;
-  EXPECT_FALSE(empty.intersect(r));
-  EXPECT_FALSE(empty.occluded(r));
-  // Degenerate (zero-area) and NaN triangles never hit and never break the build.
-  std::vector<Vec3> pos = {Vec3(0), Vec3(0), Vec3(0), Vec3(NAN), Vec3(1), Vec3(2), Vec3(-1, -1, 2), Vec3(1, -1, 2),
-                           Vec3(0, 1, 2)};
-  std::vector<UVec3> tris = {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}};
-  const Hbvh bvh(pos, tris);
-  const auto h = bvh.intersect(r);
-  ASSERT_TRUE(h);
-  EXPECT_EQ(h->triangle, 2u);
-  EXPECT_FLOAT_EQ(h->t, 2.0f);
+TEST(Accel, EmptyAndDegenerateInput) {
+  for (const std::string& kind : accelKinds()) {
+    const std::unique_ptr<Accel> empty = buildAccel(kind, std::vector<Vec3>{}, std::vector<UVec3>{});
+    Ray r;
+    EXPECT_FALSE(empty->intersect(r)) << kind;
+    EXPECT_FALSE(empty->occluded(r)) << kind;
+    // Degenerate (zero-area) and NaN triangles never hit and never break the build.
+    std::vector<Vec3> pos = {Vec3(0), Vec3(0), Vec3(0), Vec3(NAN), Vec3(1), Vec3(2), Vec3(-1, -1, 2), Vec3(1, -1, 2),
+                             Vec3(0, 1, 2)};
+    std::vector<UVec3> tris = {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}};
+    const std::unique_ptr<Accel> accel = buildAccel(kind, pos, tris);
+    EXPECT_EQ(accel->kind(), kind);
+    const auto h = accel->intersect(r);
+    ASSERT_TRUE(h) << kind;
+    EXPECT_EQ(h->triangle, 2u);
+    EXPECT_FLOAT_EQ(h->t, 2.0f);
+  }
+  EXPECT_THROW(buildAccel("octree", std::vector<Vec3>{}, std::vector<UVec3>{}), SettingsError);
+}
+
+TEST(KdTree, StatsAreConsistent) {
+  const Soup s = randomSoup(5000, 11);
+  const KdTree kd(s.pos, s.tris);
+  const KdTreeStats& st = kd.stats();
+  EXPECT_EQ(st.triangles, 5000u);
+  EXPECT_EQ(st.nodes, 2 * st.leaves - 1);  // every inner node has two children
+  EXPECT_GE(st.references, st.triangles);   // straddling triangles are referenced per leaf
+  EXPECT_LT(st.references, 4 * st.triangles);
+  EXPECT_GT(st.emptyLeaves, 0u);            // the empty-space bonus cuts off empty cells
+  EXPECT_GT(st.maxDepth, 8);
+  EXPECT_LE(st.maxDepth, 8 + int(1.3 * std::log2(5000.0)) + 2);
+  EXPECT_GT(st.sahCost, 1.0);
+  // Packets: at least references / 4, at most one partial packet per leaf more.
+  const uint64_t packetBytes = st.bytes - st.nodes * sizeof(KdTree::Node);
+  EXPECT_GE(packetBytes, (st.references + 3) / 4 * sizeof(Triangle4));
+  EXPECT_LE(packetBytes, (st.references / 4 + st.leaves) * sizeof(Triangle4));
+}
+
+TEST(KdTree, BuildIsIdenticalAtAnyThreadCount) {
+  const Soup s = randomSoup(20000, 5);
+  KdTreeBuildSettings settings;
+  settings.parallelThreshold = 256;
+  KdTreeStats a, b;
+  std::vector<std::optional<Hit>> ha, hb;
+  Bounds3 bounds;
+  for (const Vec3& p : s.pos) bounds.extend(p);
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    const KdTree kd(s.pos, s.tris, settings);
+    (threads == 1 ? a : b) = kd.stats();
+    Rng rng(9, 0);
+    auto& hits = threads == 1 ? ha : hb;
+    for (int i = 0; i < 2000; ++i) hits.push_back(kd.intersect(makeRay(s, bounds, rng)));
+  }
+  EXPECT_EQ(a.nodes, b.nodes);
+  EXPECT_EQ(a.references, b.references);
+  EXPECT_DOUBLE_EQ(a.sahCost, b.sahCost);
+  ASSERT_EQ(ha.size(), hb.size());
+  for (size_t i = 0; i < ha.size(); ++i) {
+    ASSERT_EQ(ha[i].has_value(), hb[i].has_value());
+    if (ha[i]) {
+      EXPECT_EQ(ha[i]->triangle, hb[i]->triangle);
+    }
+  }
 }
 
 }  // namespace

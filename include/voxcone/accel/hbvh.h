@@ -8,20 +8,10 @@
 /// the split heuristic (hbvh_build.cpp), traversal (hbvh_traverse.cpp) and the primitive test
 /// (triangle.h) live apart.
 
-#include "voxcone/core/bounds.h"
-#include "voxcone/core/progress.h"
-#include "voxcone/core/ray.h"
-
-#include <nlohmann/json_fwd.hpp>
-
-#include <cstdint>
-#include <optional>
-#include <vector>
+#include "voxcone/accel/accel.h"
+#include "voxcone/accel/triangle.h"
 
 namespace voxcone {
-
-class Scene;
-struct SurfaceHit;
 
 /// Build settings (cf. Embree's RTCBuildArguments).
 struct HbvhBuildSettings {
@@ -54,22 +44,10 @@ struct HbvhStats {
   nlohmann::json toJson() const;
 };
 
-/// A ray hit: distance along the ray (units of |dir|), triangle id, barycentrics of v1 and v2.
-struct Hit {
-  float t = kInf;
-  uint32_t triangle = 0;
-  float b1 = 0.0f, b2 = 0.0f;
-};
-
-/// The hybrid BVH over a triangle soup.
-class Hbvh {
+/// The hybrid BVH over a triangle soup. With sphereAreaRatio 0 it is a plain AABB BVH (kind
+/// "bvh"): the same SAH build, layout and traversal, no spheres.
+class Hbvh final : public Accel {
 public:
-  /// Four triangles side by side for the SSE watertight test; unused lanes hold NaN vertices
-  /// (never hit).
-  struct alignas(16) Triangle4 {
-    float v[3][3][4];  ///< [vertex][axis][lane]
-    uint32_t id[4];    ///< original triangle index per lane
-  };
 
   /// 4-wide node, 128 bytes: the children's boxes side by side (one SSE register per plane).
   struct alignas(64) Node4 {
@@ -92,15 +70,17 @@ public:
   /// Build over a scene's triangles.
   explicit Hbvh(const Scene& scene, const HbvhBuildSettings& settings = {}, Progress* progress = nullptr);
 
-  /// Closest hit in (ray.tMin, ray.tMax), or nothing.
-  std::optional<Hit> intersect(const Ray& ray) const;
-  /// True when anything is hit in (ray.tMin, tMax).
-  bool occluded(const Ray& ray, float tMax) const;
-  bool occluded(const Ray& ray) const { return occluded(ray, ray.tMax); }
+  std::optional<Hit> intersect(const Ray& ray) const override;
+  bool occluded(const Ray& ray, float tMax) const override;
+  using Accel::occluded;
+  Bounds3 bounds() const override;
+  std::string kind() const override { return m_settings.sphereAreaRatio > 0.0f ? "hbvh" : "bvh"; }
+  uint64_t bytes() const override { return m_stats.bytes; }
+  double buildSeconds() const override { return m_stats.buildSeconds; }
+  nlohmann::json statsJson() const override;
 
   const HbvhStats& stats() const { return m_stats; }
   const HbvhBuildSettings& settings() const { return m_settings; }
-  Bounds3 bounds() const;
 
 private:
   void build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress);
@@ -112,9 +92,5 @@ private:
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
   std::vector<Triangle4> m_tris;    ///< leaf triangles, four to a packet, in leaf order
 };
-
-/// The surface `ray` hits first: Scene::surfaceAt at accel's closest hit. False when it hits
-/// nothing (out is left alone).
-bool intersectSurface(const Scene& scene, const Hbvh& accel, const Ray& ray, SurfaceHit& out);
 
 }  // namespace voxcone

@@ -6,7 +6,35 @@
 
 #include "voxcone/core/ray.h"
 
+#include <cstdint>
+#include <limits>
+#include <vector>
+
 namespace voxcone {
+
+/// Four triangles side by side for the 4-wide (SSE) watertight test of the HBVH's and the
+/// kd-tree's leaves; unused lanes hold NaN vertices (never hit).
+struct alignas(16) Triangle4 {
+  float v[3][3][4];  ///< [vertex][axis][lane]
+  uint32_t id[4];    ///< original triangle index per lane
+};
+
+/// Append the triangles ids[0..count) to `out`, four to a packet.
+inline void packTriangles(const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, const uint32_t* ids,
+                          uint32_t count, std::vector<Triangle4>& out) {
+  for (uint32_t first = 0; first < count; first += 4) {
+    Triangle4 t4;
+    for (uint32_t lane = 0; lane < 4; ++lane) {
+      const bool used = first + lane < count;
+      t4.id[lane] = used ? ids[first + lane] : 0u;
+      for (int vtx = 0; vtx < 3; ++vtx) {
+        const Vec3 v = used ? pos[tris[ids[first + lane]][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
+        for (int a = 0; a < 3; ++a) t4.v[vtx][a][lane] = v[a];
+      }
+    }
+    out.push_back(t4);
+  }
+}
 
 /// Per-ray constants of the watertight test: the axis permutation and shear.
 struct WatertightRay {

@@ -17,7 +17,7 @@
 
 namespace voxcone {
 
-class Hbvh;
+class Accel;
 
 /// Estimates the radiance arriving along camera rays. Implementations are immutable while
 /// rendering (`li` is called concurrently); per-render work happens in `prepare`.
@@ -40,7 +40,7 @@ public:
 /// integrator does not read is an error (unused settings are reported, as pbrt-v4 does).
 struct IntegratorContext {
   const Scene& scene;
-  const Hbvh& accel;
+  const Accel& accel;
   RenderSettings settings;
   nlohmann::json options = nlohmann::json::object();
 };

@@ -17,7 +17,7 @@ public:
 
 private:
   const Scene& m_scene;
-  const Hbvh& m_accel;
+  const Accel& m_accel;
   int m_maxDepth;
   int m_rrDepth = 3;
 };

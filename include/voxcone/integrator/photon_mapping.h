@@ -62,7 +62,7 @@ private:
                 const SurfaceHit& hit, const Vec3& woWorld) const;
 
   const Scene& m_scene;
-  const Hbvh& m_accel;
+  const Accel& m_accel;
   int m_maxDepth;
   PhotonSettings m_photonSettings;
   int m_k = 100;

@@ -104,7 +104,7 @@ private:
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& n, const Vec3& d, float tMax) const;
 
   const Scene& m_scene;
-  const Hbvh& m_accel;
+  const Accel& m_accel;
   int m_maxDepth;
   PhotonSettings m_photonSettings;
   VoxelSettings m_voxelSettings;

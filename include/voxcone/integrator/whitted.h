@@ -18,14 +18,14 @@ public:
 
 private:
   const Scene& m_scene;
-  const Hbvh& m_accel;
+  const Accel& m_accel;
   int m_maxDepth;
   int m_lightSamples = 1;
 };
 
 /// Direct light at a non-delta surface by light sampling only (no MIS): one estimate with
 /// `samples` shadow rays. wo is the unit direction towards the viewer (world space).
-Vec3 estimateDirectLight(const Scene& scene, const Hbvh& accel, const SurfaceHit& hit, const Vec3& wo, Rng& rng,
+Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Rng& rng,
                          int samples);
 
 }  // namespace voxcone

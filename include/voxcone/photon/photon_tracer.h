@@ -16,7 +16,7 @@
 namespace voxcone {
 
 class Scene;
-class Hbvh;
+class Accel;
 
 /// A photon stored at a diffuse surface hit.
 struct Photon {
@@ -59,7 +59,7 @@ struct PhotonMaps {
 /// Trace both passes in parallel (TBB). Photon i's random stream depends only on (seed, pass,
 /// i) and photons are stored in index order, so the maps are identical at any thread count.
 /// Throws CancelledError when `progress` cancels.
-PhotonMaps tracePhotons(const Scene& scene, const Hbvh& accel, const PhotonSettings& settings,
+PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSettings& settings,
                         Progress* progress = nullptr);
 
 }  // namespace voxcone
