@@ -24,7 +24,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-COLOURS = {"path": "tab:gray", "pm": "tab:red", "voxcone": "tab:blue", "whitted": "tab:green"}
+COLOURS = {"path": "tab:gray", "pm": "tab:red", "voxcone": "tab:blue", "voxcone-auto": "tab:cyan",
+           "whitted": "tab:green"}
 
 
 def series(study):

@@ -45,7 +45,8 @@ struct BatchOptions {
 
 /// Keys a job (or a grid entry, or the defaults) may set.
 const std::set<std::string> kJobKeys = {"name",    "scene",   "method", "spp",   "res",      "seed",
-                                        "max_depth", "options", "accel",  "threads", "reference"};
+                                        "max_depth", "options", "accel",  "threads", "reference",
+                                        "target_error", "time_budget"};
 
 /// One render of the batch.
 struct Job {
@@ -95,6 +96,8 @@ std::string jobName(const nlohmann::json& spec) {
   if (spec.contains("spp")) name += "_spp" + slug(spec["spp"]);
   if (spec.contains("accel")) name += "_" + slug(spec["accel"]);
   if (spec.contains("threads")) name += "_t" + slug(spec["threads"]);
+  if (spec.contains("target_error")) name += "_target" + slug(spec["target_error"]);
+  if (spec.contains("time_budget")) name += "_budget" + slug(spec["time_budget"]);
   for (const auto& [key, value] : spec["options"].items()) name += "_" + slug(key) + slug(value);
   if (name.size() > 120) name.resize(120);
   char hash[17];
@@ -125,6 +128,9 @@ void validateSpec(const nlohmann::json& spec, const std::string& where) {
   if (!isInt("spp") || !isInt("seed") || !isInt("max_depth") || !isInt("threads"))
     throw SettingsError(where + ": spp, seed, max_depth and threads must be integers");
   if (spec.contains("accel") && !spec["accel"].is_string()) throw SettingsError(where + ".accel: expected a string");
+  for (const char* k : {"target_error", "time_budget"})
+    if (spec.contains(k) && !(spec[k].is_number() && spec[k].get<double>() > 0.0))
+      throw SettingsError(where + "." + k + ": expected a positive number");
   if (spec.contains("method") && !spec["method"].is_string()) throw SettingsError(where + ".method: expected a string");
   if (spec.contains("res") && !spec["res"].is_string()) throw SettingsError(where + ".res: expected WIDTHxHEIGHT");
 }
@@ -245,6 +251,8 @@ JobResult runJob(const Job& job, const fs::path& outDir, const BatchOptions& o) 
   if (s.contains("seed")) cmd += " --seed " + std::to_string(s["seed"].get<int64_t>());
   if (s.contains("max_depth")) cmd += " --max-depth " + std::to_string(s["max_depth"].get<int64_t>());
   if (s.contains("accel")) cmd += " --accel " + shellQuote(s["accel"].get<std::string>());
+  if (s.contains("target_error")) cmd += " --target-error " + s["target_error"].dump();
+  if (s.contains("time_budget")) cmd += " --time-budget " + s["time_budget"].dump();
   cmd += " 2>&1";
   std::string out;
   const int code = runCapture(cmd, out);
@@ -308,6 +316,8 @@ nlohmann::json resultRow(const Job& job, const JobResult& r) {
     row["width"] = st.value("width", nlohmann::json());
     row["height"] = st.value("height", nlohmann::json());
     row["resolved_method"] = r.sidecar.value("method", nlohmann::json());
+    row["resolved_spp"] = st.value("spp", nlohmann::json());
+    if (r.sidecar.contains("auto")) row["auto"] = r.sidecar["auto"];
     row["integrator"] = st.value("integrator", nlohmann::json::object());
     const nlohmann::json::json_pointer fieldBytes("/stats/integrator/field_bytes");
     if (r.sidecar.contains(fieldBytes)) row["field_bytes"] = r.sidecar[fieldBytes];

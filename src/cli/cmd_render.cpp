@@ -7,6 +7,7 @@
 #include "voxcone/core/parallel.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/image/image_io.h"
+#include "voxcone/integrator/auto_settings.h"
 #include "voxcone/integrator/integrator.h"
 
 #include <nlohmann/json.hpp>
@@ -29,6 +30,8 @@ struct RenderOptions {
   int maxDepth = 0;
   std::string integratorOptions = "{}";
   std::string accel = "hbvh";
+  double targetError = 0.0;
+  double timeBudget = 0.0;
   bool quiet = false;
 };
 
@@ -53,6 +56,13 @@ void runRender(const RenderOptions& o) {
   const double loadSec = t.seconds();
 
   RenderSettings settings = scene.render;
+  const bool autoSettings = o.targetError > 0.0 || o.timeBudget > 0.0;
+  if (autoSettings) {
+    if (!o.method.empty() && o.method != "voxcone")
+      throw SettingsError("--target-error and --time-budget choose voxcone's settings; --method " + o.method +
+                          " has none to choose");
+    settings.method = "voxcone";
+  }
   if (!o.method.empty()) settings.method = o.method;
   if (o.spp != 0) settings.spp = o.spp;
   if (!o.resolution.empty()) parseResolution(o.resolution, settings);
@@ -89,6 +99,24 @@ void runRender(const RenderOptions& o) {
   const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
   const double buildSec = t.seconds();
 
+  // --target-error / --time-budget: a pilot pass chooses level, photons, cones and spp.
+  nlohmann::json autoReport;
+  double pilotSec = 0.0;
+  if (autoSettings) {
+    AutoSettingsRequest request;
+    request.targetRelMse = o.targetError;
+    request.timeBudget = o.timeBudget > 0.0 ? std::max(1e-3, o.timeBudget - total.seconds()) : 0.0;
+    request.fixedOptions = options;
+    request.fixedSpp = o.spp;
+    const AutoSettingsResult chosen = chooseVoxconeSettings(scene, *accel, settings, request, &progress);
+    options = chosen.options;
+    settings.spp = chosen.spp;
+    pilotSec = chosen.pilotSeconds;
+    autoReport = chosen.report;
+    std::printf("%s", chosen.summary.c_str());
+    std::fflush(stdout);
+  }
+
   IntegratorContext ctx{scene, *accel, settings, options};
   std::unique_ptr<Integrator> integrator = createIntegrator(settings.method, ctx);
   t.reset();
@@ -105,8 +133,9 @@ void runRender(const RenderOptions& o) {
                       {"max_depth", settings.maxDepth}, {"seed", settings.seed}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
-  meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"prepare_seconds", prepareSec},
-                     {"render_seconds", result.seconds}};
+  meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"pilot_seconds", pilotSec},
+                     {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds}};
+  if (autoSettings) meta["auto"] = autoReport;
   meta["stats"] = {{"scene", scene.statsJson()}, {"accel", accel->statsJson()},
                    {"integrator", integrator->statsJson()},
                    {"samples", result.samples}, {"invalid_samples", result.invalidSamples}};
@@ -143,6 +172,12 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");
   cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres) or kdtree")
       ->check(CLI::IsMember(accelKinds()));
+  cmd->add_option("--target-error", o->targetError,
+                  "voxcone: choose level, photons, cones and spp from a pilot pass to meet this relMSE in the least time")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--time-budget", o->timeBudget,
+                  "voxcone: choose them for the least error in this many seconds (load and pilot included)")
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

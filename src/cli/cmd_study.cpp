@@ -158,12 +158,16 @@ nlohmann::json sweepManifest(const SweepOptions& o) {
   } else if (o.quick) {
     grid = {{{"method", "path"}, {"spp", {1, 4, 16}}},
             {{"method", "pm"}, {"spp", 2}, {"options", {{"photons", {2000, 8000}}}}},
-            {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}}};
+            {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}},
+            {{"method", "voxcone"}, {"target_error", 0.05}}};
   } else {
     grid = {{{"method", "path"}, {"spp", {4, 16, 64, 256, 1024}}},
             {{"method", "pm"}, {"spp", 16}, {"options", {{"photons", {100000, 300000, 1000000}}}}},
             {{"method", "voxcone"}, {"spp", {4, 16}},
-             {"options", {{"level", {6, 7}}, {"photons", {250000, 1000000}}, {"cones", {6, 16}}}}}};
+             {"options", {{"level", {6, 7}}, {"photons", {250000, 1000000}}, {"cones", {6, 16}}}}},
+            // render --target-error / --time-budget: where its choices land against the fronts.
+            {{"method", "voxcone"}, {"target_error", {0.01, 0.005, 0.003}}},
+            {{"method", "voxcone"}, {"time_budget", {5, 10, 20}}}};
   }
   return {{"reference", fs::absolute(o.referencePath).string()}, {"defaults", defaults}, {"grid", grid}};
 }
@@ -211,14 +215,23 @@ void runSweepStudy(const SweepOptions& o) {
   for (const nlohmann::json& r : results["rows"]) {
     if (r["status"] != "ok" && r["status"] != "existing") continue;
     if (!r.contains("metrics") || !r["metrics"].contains("relmse")) continue;
-    byMethod[r["method"].get<std::string>()].push_back(rows.size());
+    // Renders that chose their own settings (--target-error / --time-budget) are a series of
+    // their own.
+    const bool chosen = r.contains("target_error") || r.contains("time_budget");
+    const std::string method = r["method"].get<std::string>() + (chosen ? "-auto" : "");
+    byMethod[method].push_back(rows.size());
     const nlohmann::json st = r.value("integrator", nlohmann::json::object());
-    rows.push_back({{"name", r["name"]}, {"method", r["method"]}, {"spp", r.value("spp", 0)}, {"options", r["options"]},
+    rows.push_back({{"name", r["name"]}, {"method", method}, {"spp", r.value("resolved_spp", r.value("spp", 0))}, {"options", r["options"]},
                     {"photons", st.value("photons", nlohmann::json())}, {"level", st.value("level", nlohmann::json())},
                     {"seconds", r["timings"]["total_seconds"]}, {"relmse", r["metrics"]["relmse"]},
                     {"psnr_srgb8", r["metrics"]["psnr_srgb8"]}, {"mse", r["metrics"]["mse"]},
                     {"peak_rss_bytes", r["peak_rss_bytes"]},
                     {"field_bytes", r.value("field_bytes", nlohmann::json(0))}, {"pareto", false}});
+    if (chosen) {
+      rows.back()["predicted_relmse"] = r["auto"]["predicted_relmse"];
+      rows.back()["target"] = r.contains("target_error") ? "relMSE " + r["target_error"].dump()
+                                                         : r["time_budget"].dump() + " s";
+    }
   }
   std::map<std::string, std::vector<std::pair<double, double>>> fronts;
   for (const auto& [method, idx] : byMethod) {
@@ -232,18 +245,32 @@ void runSweepStudy(const SweepOptions& o) {
   // Equal-time and equal-error comparisons: each front point of pm and voxcone against path's front.
   nlohmann::json compare = nlohmann::json::array();
   const auto& pathFront = fronts["path"];
-  for (const nlohmann::json& r : rows) {
-    if (!r["pareto"].get<bool>() || r["method"] == "path") continue;
-    const double t = r["seconds"].get<double>(), e = r["relmse"].get<double>();
-    // Path's front inverted (error -> time): the front is sorted by time, errors falling.
+  // A front inverted (error -> time): fronts are sorted by time, errors falling.
+  auto inverted = [](const std::vector<std::pair<double, double>>& front) {
     std::vector<std::pair<double, double>> inv;
-    for (auto it = pathFront.rbegin(); it != pathFront.rend(); ++it) inv.emplace_back(it->second, it->first);
-    const double pathErr = onFront(pathFront, t), pathTime = onFront(inv, e);
-    auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-    compare.push_back({{"name", r["name"]}, {"method", r["method"]}, {"seconds", t}, {"relmse", e},
-                       {"psnr_srgb8", r["psnr_srgb8"]},
-                       {"path_relmse_at_equal_time", num(pathErr)}, {"path_seconds_at_equal_relmse", num(pathTime)},
-                       {"speedup_vs_path", num(pathTime / t)}});
+    for (auto it = front.rbegin(); it != front.rend(); ++it) inv.emplace_back(it->second, it->first);
+    return inv;
+  };
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  for (const nlohmann::json& r : rows) {
+    // pm's and voxcone's front points; every render that chose its settings.
+    const bool chosen = r["method"] == "voxcone-auto";
+    if ((!r["pareto"].get<bool>() && !chosen) || r["method"] == "path") continue;
+    const double t = r["seconds"].get<double>(), e = r["relmse"].get<double>();
+    const double pathErr = onFront(pathFront, t), pathTime = onFront(inverted(pathFront), e);
+    nlohmann::json c = {{"name", r["name"]}, {"method", r["method"]}, {"seconds", t}, {"relmse", e},
+                        {"psnr_srgb8", r["psnr_srgb8"]},
+                        {"path_relmse_at_equal_time", num(pathErr)}, {"path_seconds_at_equal_relmse", num(pathTime)},
+                        {"speedup_vs_path", num(pathTime / t)}};
+    if (chosen) {
+      // How close the choice lands to voxcone's own front.
+      const auto& vf = fronts["voxcone"];
+      c["target"] = r["target"];
+      c["predicted_relmse"] = r["predicted_relmse"];
+      c["voxcone_front_relmse_at_equal_time"] = num(onFront(vf, t));
+      c["voxcone_front_seconds_at_equal_relmse"] = num(onFront(inverted(vf), e));
+    }
+    compare.push_back(c);
   }
   const nlohmann::json study = {{"study", o.kind}, {"scene", o.scenePath}, {"reference", o.referencePath},
                                 {"rows", rows}, {"comparisons", compare}};
@@ -280,6 +307,17 @@ void runSweepStudy(const SweepOptions& o) {
                 c["name"].get<std::string>().substr(0, 48).c_str(), c["seconds"].get<double>(), c["relmse"].get<double>(),
                 show(c["psnr_srgb8"], "%.2f").c_str(), show(c["path_relmse_at_equal_time"], "%.5f").c_str(),
                 show(c["path_seconds_at_equal_relmse"], "%.2f").c_str());
+  }
+  for (const nlohmann::json& c : compare) {
+    if (c["method"] != "voxcone-auto") continue;
+    const nlohmann::json& f = c["voxcone_front_relmse_at_equal_time"];
+    std::printf("voxcone-auto, target %s: predicted relMSE %.5f, measured %.5f in %.2f s; voxcone's front at that "
+                "time: %s\n",
+                c["target"].get<std::string>().c_str(), c["predicted_relmse"].get<double>(), c["relmse"].get<double>(),
+                c["seconds"].get<double>(),
+                f.is_null() ? "outside the front's time range"
+                            : ("relMSE " + std::to_string(f.get<double>()) + " (" +
+                               std::to_string(c["relmse"].get<double>() / f.get<double>()) + "x)").c_str());
   }
   } else {
     std::printf("%-8s %8s %6s %9s %10s %10s %8s %10s\n", "method", "photons", "level", "time s", "relMSE", "MSE",

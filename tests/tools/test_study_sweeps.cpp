@@ -32,7 +32,8 @@ TEST_F(StudySweeps, QuickStudyTablesFrontsAndChart) {
   std::ifstream f(path("study/speed-accuracy.json"));
   const nlohmann::json study = nlohmann::json::parse(f);
   const nlohmann::json& rows = study["rows"];
-  ASSERT_EQ(rows.size(), 9u);  // path 3 spp, pm 2 photon counts, voxcone 2 levels x 2 cone counts
+  // path 3 spp, pm 2 photon counts, voxcone 2 levels x 2 cone counts, voxcone --target-error
+  ASSERT_EQ(rows.size(), 10u);
 
   // Pareto flags by brute force: a render is on its method's front when no other render of the
   // method is at least as fast and more accurate, or faster and at least as accurate.
@@ -57,7 +58,17 @@ TEST_F(StudySweeps, QuickStudyTablesFrontsAndChart) {
       pathMax = std::max(pathMax, r["seconds"].get<double>());
     }
   int nonPathFront = 0;
-  for (const nlohmann::json& r : rows) nonPathFront += r["pareto"].get<bool>() && r["method"] != "path";
+  for (const nlohmann::json& r : rows)
+    nonPathFront += (r["pareto"].get<bool>() && r["method"] != "path") || r["method"] == "voxcone-auto";
+  // The render that chose its own settings is compared with voxcone's front too.
+  int chosen = 0;
+  for (const nlohmann::json& c : study["comparisons"])
+    if (c["method"] == "voxcone-auto") {
+      ++chosen;
+      EXPECT_TRUE(c.contains("voxcone_front_relmse_at_equal_time"));
+      EXPECT_GT(c["predicted_relmse"].get<double>(), 0.0);
+    }
+  EXPECT_EQ(chosen, 1);
   ASSERT_EQ(study["comparisons"].size(), size_t(nonPathFront));
   for (const nlohmann::json& c : study["comparisons"])
     if (!c["path_seconds_at_equal_relmse"].is_null()) {
