@@ -14,6 +14,7 @@
 #include "../support/test_scenes.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <tbb/parallel_for.h>
 
@@ -231,31 +232,29 @@ TEST(Hbvh, StatsAreConsistent) {
   EXPECT_LE(st.avgLeafSize, 8.0);
 }
 
-TEST(Hbvh, BuildIsIdenticalAtAnyThreadCount) {
+TEST(Accel, BuildIsIdenticalAtAnyThreadCount) {
   const Soup s = randomSoup(20000, 5);
-  HbvhBuildSettings settings;
-  settings.parallelThreshold = 256;
-  HbvhStats a, b;
-  std::vector<std::optional<Hit>> ha, hb;
   Bounds3 bounds;
   for (const Vec3& p : s.pos) bounds.extend(p);
-  for (int threads : {1, 2}) {
-    ThreadLimit limit(threads);
-    const Hbvh bvh(s.pos, s.tris, settings);
-    (threads == 1 ? a : b) = bvh.stats();
-    Rng rng(9, 0);
-    auto& hits = threads == 1 ? ha : hb;
-    for (int i = 0; i < 2000; ++i) hits.push_back(bvh.intersect(makeRay(s, bounds, rng)));
-  }
-  EXPECT_EQ(a.nodes, b.nodes);
-  EXPECT_EQ(a.maxDepth, b.maxDepth);
-  EXPECT_DOUBLE_EQ(a.sahCost, b.sahCost);
-  ASSERT_EQ(ha.size(), hb.size());
-  for (size_t i = 0; i < ha.size(); ++i) {
-    ASSERT_EQ(ha[i].has_value(), hb[i].has_value());
-    if (ha[i]) {
-      EXPECT_EQ(ha[i]->t, hb[i]->t);
-      EXPECT_EQ(ha[i]->triangle, hb[i]->triangle);
+  for (const std::string& kind : accelKinds()) {
+    nlohmann::json stats[2];
+    std::vector<std::optional<Hit>> hits[2];
+    for (int threads : {1, 2}) {
+      ThreadLimit limit(threads);
+      const std::unique_ptr<Accel> accel = buildAccel(kind, s.pos, s.tris);
+      stats[threads - 1] = accel->statsJson();
+      stats[threads - 1].erase("build_seconds");
+      Rng rng(9, 0);
+      for (int i = 0; i < 2000; ++i) hits[threads - 1].push_back(accel->intersect(makeRay(s, bounds, rng)));
+    }
+    EXPECT_EQ(stats[0], stats[1]) << kind;  // nodes, leaves, depth, SAH cost, bytes
+    ASSERT_EQ(hits[0].size(), hits[1].size());
+    for (size_t i = 0; i < hits[0].size(); ++i) {
+      ASSERT_EQ(hits[0][i].has_value(), hits[1][i].has_value()) << kind;
+      if (hits[0][i]) {
+        EXPECT_EQ(hits[0][i]->t, hits[1][i]->t);
+        EXPECT_EQ(hits[0][i]->triangle, hits[1][i]->triangle);
+      }
     }
   }
 }
@@ -296,34 +295,6 @@ TEST(KdTree, StatsAreConsistent) {
   const uint64_t packetBytes = st.bytes - st.nodes * sizeof(KdTree::Node);
   EXPECT_GE(packetBytes, (st.references + 3) / 4 * sizeof(Triangle4));
   EXPECT_LE(packetBytes, (st.references / 4 + st.leaves) * sizeof(Triangle4));
-}
-
-TEST(KdTree, BuildIsIdenticalAtAnyThreadCount) {
-  const Soup s = randomSoup(20000, 5);
-  KdTreeBuildSettings settings;
-  settings.parallelThreshold = 256;
-  KdTreeStats a, b;
-  std::vector<std::optional<Hit>> ha, hb;
-  Bounds3 bounds;
-  for (const Vec3& p : s.pos) bounds.extend(p);
-  for (int threads : {1, 2}) {
-    ThreadLimit limit(threads);
-    const KdTree kd(s.pos, s.tris, settings);
-    (threads == 1 ? a : b) = kd.stats();
-    Rng rng(9, 0);
-    auto& hits = threads == 1 ? ha : hb;
-    for (int i = 0; i < 2000; ++i) hits.push_back(kd.intersect(makeRay(s, bounds, rng)));
-  }
-  EXPECT_EQ(a.nodes, b.nodes);
-  EXPECT_EQ(a.references, b.references);
-  EXPECT_DOUBLE_EQ(a.sahCost, b.sahCost);
-  ASSERT_EQ(ha.size(), hb.size());
-  for (size_t i = 0; i < ha.size(); ++i) {
-    ASSERT_EQ(ha[i].has_value(), hb[i].has_value());
-    if (ha[i]) {
-      EXPECT_EQ(ha[i]->triangle, hb[i]->triangle);
-    }
-  }
 }
 
 }  // namespace
