@@ -4,6 +4,7 @@
 // are joined by position, not by completion order.
 
 #include "voxcone/accel/hbvh.h"
+#include "voxcone/accel/triangle.h"
 
 #include "voxcone/core/error.h"
 #include "voxcone/core/timer.h"
@@ -345,13 +346,8 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // References for every triangle with finite, indexable vertices.
   builder.refs.reserve(triangles.size());
   for (uint32_t i = 0; i < triangles.size(); ++i) {
-    const UVec3& t = triangles[i];
-    if (t.x >= positions.size() || t.y >= positions.size() || t.z >= positions.size()) continue;
     PrimRef r;
-    r.box.extend(positions[t.x]);
-    r.box.extend(positions[t.y]);
-    r.box.extend(positions[t.z]);
-    if (!isFinite(r.box.lo) || !isFinite(r.box.hi)) continue;
+    if (!triangleBounds(positions, triangles[i], r.box)) continue;
     r.centroid = r.box.center();
     r.id = i;
     builder.refs.push_back(r);

@@ -111,18 +111,7 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
     if (cur & kLeafBit) {
       // Leaf: test its packets, shrinking tMax to the nearest hit.
       const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
-      for (uint32_t p = first; p < first + count; ++p) {
-        float t[4], b1[4], b2[4];
-        int mask = intersectTriangle4(m_tris[p], ray, rt, ray.tMin, tMax, t, b1, b2);
-        for (; mask; mask &= mask - 1) {
-          const int i = __builtin_ctz(static_cast<unsigned>(mask));
-          if (t[i] < tMax) {
-            tMax = t[i];
-            hit = {t[i], m_tris[p].id[i], b1[i], b2[i]};
-            found = true;
-          }
-        }
-      }
+      for (uint32_t p = first; p < first + count; ++p) found |= closerHit(m_tris[p], ray, rt, tMax, hit);
     } else {
       const Node4& n = nodes[cur];
       float tNear[4];

@@ -150,13 +150,8 @@ KdTree::KdTree(const std::vector<Vec3>& positions, const std::vector<UVec3>& tri
   std::vector<KdRef> refs;
   refs.reserve(triangles.size());
   for (uint32_t i = 0; i < triangles.size(); ++i) {
-    const UVec3& t = triangles[i];
-    if (t.x >= positions.size() || t.y >= positions.size() || t.z >= positions.size()) continue;
     KdRef r;
-    r.box.extend(positions[t.x]);
-    r.box.extend(positions[t.y]);
-    r.box.extend(positions[t.z]);
-    if (!isFinite(r.box.lo) || !isFinite(r.box.hi)) continue;
+    if (!triangleBounds(positions, triangles[i], r.box)) continue;
     r.id = i;
     m_bounds.extend(r.box);
     refs.push_back(r);
@@ -214,13 +209,12 @@ KdTree::KdTree(const std::vector<Vec3>& positions, const std::vector<UVec3>& tri
   if (progress) progress->finish();
 }
 
-bool KdTree::clipToBounds(const Ray& ray, float& t0, float& t1) const {
+bool KdTree::clipToBounds(const Ray& ray, const float invDir[3], float tMax, float& t0, float& t1) const {
   if (m_nodes.empty()) return false;
   t0 = ray.tMin;
-  t1 = ray.tMax;
+  t1 = tMax;
   for (int a = 0; a < 3; ++a) {
-    const float inv = 1.0f / ray.dir[a];
-    float tNear = (m_bounds.lo[a] - ray.origin[a]) * inv, tFar = (m_bounds.hi[a] - ray.origin[a]) * inv;
+    float tNear = (m_bounds.lo[a] - ray.origin[a]) * invDir[a], tFar = (m_bounds.hi[a] - ray.origin[a]) * invDir[a];
     if (tNear > tFar) std::swap(tNear, tFar);
     // NaN (origin on a face of a flat box, direction parallel) leaves the range as it is.
     tFar *= kCellSlack;
@@ -233,31 +227,6 @@ bool KdTree::clipToBounds(const Ray& ray, float& t0, float& t1) const {
 
 namespace {
 
-/// Descend from `node` over [t0, t1] to the next leaf, pushing the far children the ray also
-/// crosses. Returns the leaf.
-template <typename Stack>
-inline uint32_t descend(const KdTree::Node* nodes, uint32_t cur, const Ray& ray, const float invDir[3], float& t0,
-                        float& t1, Stack& push) {
-  for (;;) {
-    const KdTree::Node& n = nodes[cur];
-    if (n.leaf()) return cur;
-    const int a = n.axis();
-    const float tPlane = (n.split - ray.origin[a]) * invDir[a];
-    const bool belowFirst = ray.origin[a] < n.split || (ray.origin[a] == n.split && ray.dir[a] <= 0.0f);
-    const uint32_t first = belowFirst ? cur + 1 : n.aboveChild();
-    const uint32_t second = belowFirst ? n.aboveChild() : cur + 1;
-    if (tPlane > t1 * kCellSlack || tPlane <= 0.0f) {
-      cur = first;
-    } else if (tPlane * kCellSlack < t0) {
-      cur = second;
-    } else {
-      push(second, tPlane, t1);
-      cur = first;
-      t1 = tPlane;
-    }
-  }
-}
-
 struct KdTodo {
   uint32_t node;
   float t0, t1;
@@ -265,66 +234,62 @@ struct KdTodo {
 
 }  // namespace
 
-std::optional<Hit> KdTree::intersect(const Ray& ray) const {
-  float t0, t1;
-  if (!clipToBounds(ray, t0, t1)) return std::nullopt;
+template <bool kAnyHit>
+bool KdTree::traverse(const Ray& ray, float tMax, Hit& hit) const {
   float invDir[3];
   for (int a = 0; a < 3; ++a) invDir[a] = 1.0f / ray.dir[a];
+  float t0, t1;
+  if (!clipToBounds(ray, invDir, tMax, t0, t1)) return false;
   const RayTri4 rt(ray);
   KdTodo stack[kStackSize];
   int sp = 0;
-  auto push = [&](uint32_t node, float a, float b) { stack[sp++] = {node, a, b}; };
-  Hit hit;
-  float closest = ray.tMax;
   bool found = false;
   uint32_t cur = 0;
   for (;;) {
-    const Node& leaf = m_nodes[descend(m_nodes.data(), cur, ray, invDir, t0, t1, push)];
-    for (uint32_t p = leaf.firstPacket; p < leaf.firstPacket + leaf.packetCount(); ++p) {
-      float t[4], b1[4], b2[4];
-      for (int mask = intersectTriangle4(m_tris[p], ray, rt, ray.tMin, closest, t, b1, b2); mask; mask &= mask - 1) {
-        const int i = __builtin_ctz(static_cast<unsigned>(mask));
-        if (t[i] < closest) {
-          closest = t[i];
-          hit = {t[i], m_tris[p].id[i], b1[i], b2[i]};
-          found = true;
-        }
+    // Down to the next leaf along the ray, pushing the far children it also crosses.
+    for (const Node* n = &m_nodes[cur]; !n->leaf(); n = &m_nodes[cur]) {
+      const int a = n->axis();
+      const float tPlane = (n->split - ray.origin[a]) * invDir[a];
+      const bool belowFirst = ray.origin[a] < n->split || (ray.origin[a] == n->split && ray.dir[a] <= 0.0f);
+      const uint32_t first = belowFirst ? cur + 1 : n->aboveChild();
+      const uint32_t second = belowFirst ? n->aboveChild() : cur + 1;
+      if (tPlane > t1 * kCellSlack || tPlane <= 0.0f) {
+        cur = first;
+      } else if (tPlane * kCellSlack < t0) {
+        cur = second;
+      } else {
+        stack[sp++] = {second, tPlane, t1};
+        cur = first;
+        t1 = tPlane;
       }
     }
-    // The remaining cells lie further along the ray, nearest on top.
-    if (sp == 0 || stack[sp - 1].t0 > closest * kCellSlack) break;
+    const Node& leaf = m_nodes[cur];
+    for (uint32_t p = leaf.firstPacket; p < leaf.firstPacket + leaf.packetCount(); ++p) {
+      if (kAnyHit) {
+        float t[4], b1[4], b2[4];
+        if (intersectTriangle4(m_tris[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
+      } else {
+        found |= closerHit(m_tris[p], ray, rt, tMax, hit);
+      }
+    }
+    // The remaining cells lie further along the ray, nearest on top: none holds a closer hit
+    // once the nearest starts beyond the closest one.
+    if (sp == 0 || (!kAnyHit && stack[sp - 1].t0 > tMax * kCellSlack)) return found;
     --sp;
     cur = stack[sp].node;
     t0 = stack[sp].t0;
     t1 = stack[sp].t1;
   }
-  return found ? std::optional<Hit>(hit) : std::nullopt;
+}
+
+std::optional<Hit> KdTree::intersect(const Ray& ray) const {
+  Hit hit;
+  return traverse<false>(ray, ray.tMax, hit) ? std::optional<Hit>(hit) : std::nullopt;
 }
 
 bool KdTree::occluded(const Ray& ray, float tMax) const {
-  Ray r = ray;
-  r.tMax = tMax;
-  float t0, t1;
-  if (!clipToBounds(r, t0, t1)) return false;
-  float invDir[3];
-  for (int a = 0; a < 3; ++a) invDir[a] = 1.0f / ray.dir[a];
-  const RayTri4 rt(ray);
-  KdTodo stack[kStackSize];
-  int sp = 0;
-  auto push = [&](uint32_t node, float a, float b) { stack[sp++] = {node, a, b}; };
-  uint32_t cur = 0;
-  for (;;) {
-    const Node& leaf = m_nodes[descend(m_nodes.data(), cur, ray, invDir, t0, t1, push)];
-    for (uint32_t p = leaf.firstPacket; p < leaf.firstPacket + leaf.packetCount(); ++p) {
-      float t[4], b1[4], b2[4];
-      if (intersectTriangle4(m_tris[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
-    }
-    if (sp == 0) return false;
-    --sp;
-    cur = stack[sp].node;
-    t0 = stack[sp].t0;
-    t1 = stack[sp].t1;
-  }
+  Hit unused;
+  return traverse<true>(ray, tMax, unused);
 }
 
 nlohmann::json KdTree::statsJson() const {

@@ -2,6 +2,7 @@
 // The watertight ray-triangle test (triangle.h) on a Triangle4 packet with SSE, shared by the
 // HBVH's and the kd-tree's leaves.
 
+#include "voxcone/accel/accel.h"
 #include "voxcone/accel/triangle.h"
 
 #include <smmintrin.h>
@@ -74,6 +75,22 @@ inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri
       mask |= 1 << i;
   }
   return mask;
+}
+
+/// Packet `tri` tested against the closest-hit query so far (tMax, hit): the nearest lane hit
+/// in (tMin, tMax) becomes the closest. True when one did.
+inline bool closerHit(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float& tMax, Hit& hit) {
+  float t[4], b1[4], b2[4];
+  bool found = false;
+  for (int mask = intersectTriangle4(tri, ray, rt, ray.tMin, tMax, t, b1, b2); mask; mask &= mask - 1) {
+    const int i = __builtin_ctz(static_cast<unsigned>(mask));
+    if (t[i] < tMax) {
+      tMax = t[i];
+      hit = {t[i], tri.id[i], b1[i], b2[i]};
+      found = true;
+    }
+  }
+  return found;
 }
 
 }  // namespace voxcone

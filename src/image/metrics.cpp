@@ -181,6 +181,17 @@ nlohmann::json ImageMetrics::toJson() const {
                         {"mean_reference", {number(meanReference.x), number(meanReference.y), number(meanReference.z)}}};
 }
 
+double relMseOfEstimates(const Image& a, const Image& b) {
+  checkSizes(a, b);
+  double sum = 0.0;
+  for (size_t i = 0; i < a.pixels.size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double x = a.pixels[i][c], y = b.pixels[i][c], m = 0.5 * (x + y);
+      sum += (x - y) * (x - y) / (m * m + kRelMseEpsilon);
+    }
+  return sum / (3.0 * double(a.pixels.size()));
+}
+
 ImageMetrics compareImages(const Image& test, const Image& reference) {
   checkSizes(test, reference);
   ImageMetrics m;

@@ -45,19 +45,6 @@ Pilot runPilot(const Scene& scene, const Accel& accel, const RenderSettings& pil
   return p;
 }
 
-/// relMSE of two estimates of the same image against their mean: (x - y)^2 / (((x + y) / 2)^2 +
-/// eps). metrics.h's relMSE divides by the second image, and a noisy pixel near zero there (a
-/// light's edge missed by every sample) would count thousands of times over.
-double relMse(const Image& a, const Image& b) {
-  double sum = 0.0;
-  for (size_t i = 0; i < a.pixels.size(); ++i)
-    for (int c = 0; c < 3; ++c) {
-      const double x = a.pixels[i][c], y = b.pixels[i][c], m = 0.5 * (x + y);
-      sum += (x - y) * (x - y) / (m * m + kRelMseEpsilon);
-    }
-  return a.pixels.empty() ? 0.0 : sum / (3.0 * double(a.pixels.size()));
-}
-
 std::string fmt(const char* f, double v) {
   char b[64];
   std::snprintf(b, sizeof b, f, v);
@@ -120,11 +107,11 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
 
   // The error terms (relMSE of a difference of two independent estimates is twice the variance
   // term of one).
-  const double a = std::max(0.0, relMse(noiseA.image, noiseB.image) / 2.0);
-  const double b = std::max(0.0, relMse(A.image, P.image) / (1.0 / double(p0) + 1.0 / double(p1)));
+  const double a = std::max(0.0, relMseOfEstimates(noiseA.image, noiseB.image) / 2.0);
+  const double b = std::max(0.0, relMseOfEstimates(A.image, P.image) / (1.0 / double(p0) + 1.0 / double(p1)));
   std::map<int, double> levelBias;
-  for (int l : kLevels) levelBias[l] = l == kFinestLevel ? 0.0 : relMse(levels[l].image, levels[kFinestLevel].image);
-  const double coneBias6 = relMse(A.image, C16.image);
+  for (int l : kLevels) levelBias[l] = l == kFinestLevel ? 0.0 : relMseOfEstimates(levels[l].image, levels[kFinestLevel].image);
+  const double coneBias6 = relMseOfEstimates(A.image, C16.image);
   std::map<int, double> coneBias = {{6, coneBias6}, {16, 0.0}};
   // Time terms.
   const double pilotSamples = double(ps.width) * ps.height * kPilotSpp;
@@ -149,7 +136,8 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
   struct Candidate {
     int level, cones, spp;
     uint64_t photons;
-    double error, seconds;
+    double pixelNoise, photonNoise, levelBias, coneBias, seconds;
+    double error() const { return pixelNoise + photonNoise + levelBias + coneBias; }
   };
   // A level or cone count the pilot did not render is predicted from the nearest it did.
   auto nearestLevel = [&](int l) { return std::clamp(l, 5, 8); };
@@ -162,26 +150,24 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
       for (uint64_t ph : photonChoices)
         for (int spp : sppChoices) {
           const Pilot& lp = levels[nearestLevel(l)];
-          const double error = a / spp + (ph > 0 ? b / double(ph) : 1.0) + levelBias[nearestLevel(l)] + biasOfCones(c);
           const double prepare = std::max(0.0, lp.prepareSeconds + perPhoton * (double(ph) - double(p0)));
           const double render =
               lp.renderSeconds / pilotSamples * double(settings.width) * settings.height * spp * coneTime(c);
-          all.push_back({l, c, spp, ph, error, prepare + render});
+          all.push_back({l, c, spp, ph, a / spp, ph > 0 ? b / double(ph) : 1.0, levelBias[nearestLevel(l)],
+                         biasOfCones(c), prepare + render});
         }
-  // Fastest meeting the target, or most accurate within the budget (the pilot's time spent).
-  const Candidate* best = nullptr;
-  bool met = false;
-  for (const Candidate& c : all) {
-    const bool ok = byError ? c.error <= req.targetRelMse : c.seconds <= req.timeBudget - pilotSeconds;
-    const bool better = !best ? true
-                        : ok != met ? ok
-                        : byError ? (ok ? c.seconds < best->seconds : c.error < best->error)
-                                  : (ok ? c.error < best->error : c.seconds < best->seconds);
-    if (better) {
-      best = &c;
-      met = ok;
-    }
-  }
+  // Fastest meeting the target, or most accurate within the budget (the pilot's time spent);
+  // when none does, the most accurate (target) or the fastest (budget).
+  auto meets = [&](const Candidate& c) {
+    return byError ? c.error() <= req.targetRelMse : c.seconds <= req.timeBudget - pilotSeconds;
+  };
+  auto rank = [&](const Candidate& c) {
+    const bool ok = meets(c);
+    return std::make_pair(!ok, byError == ok ? c.seconds : c.error());
+  };
+  const Candidate* best = &*std::min_element(all.begin(), all.end(),
+                                             [&](const Candidate& x, const Candidate& y) { return rank(x) < rank(y); });
+  const bool met = meets(*best);
   AutoSettingsResult r;
   r.options = fixed;
   r.options["level"] = best->level;
@@ -190,19 +176,18 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
     r.options["caustic_photons"] = uint64_t(std::llround(double(best->photons) * causticRatio));
   r.options["cones"] = best->cones;
   r.spp = best->spp;
-  r.predictedRelMse = best->error;
+  r.predictedRelMse = best->error();
   r.predictedSeconds = best->seconds;
   r.pilotSeconds = pilotSeconds;
   r.met = met;
-  const double noise = a / best->spp, photonNoise = best->photons ? b / double(best->photons) : 1.0;
-  const double lb = levelBias[nearestLevel(best->level)], cb = biasOfCones(best->cones);
+  const double noise = best->pixelNoise, photonNoise = best->photonNoise, lb = best->levelBias, cb = best->coneBias;
   nlohmann::json levelJson = nlohmann::json::object();
   for (const auto& [l, v] : levelBias) levelJson[std::to_string(l)] = v;
   r.report = {{"target_relmse", byError ? nlohmann::json(req.targetRelMse) : nlohmann::json()},
               {"time_budget_seconds", byTime ? nlohmann::json(req.timeBudget) : nlohmann::json()},
               {"met", met},
               {"chosen", {{"level", best->level}, {"photons", best->photons}, {"cones", best->cones}, {"spp", best->spp}}},
-              {"predicted_relmse", best->error},
+              {"predicted_relmse", best->error()},
               {"predicted_terms", {{"pixel_noise", noise}, {"photon_noise", photonNoise}, {"level_bias", lb}, {"cone_bias", cb}}},
               {"predicted_seconds", best->seconds},
               {"pilot",
@@ -214,7 +199,7 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
   r.summary = std::string(met ? "chose" : (byError ? "no setting meets the target; closest:" : "nothing fits the budget; fastest:")) +
               " level " + std::to_string(best->level) + ", " + std::to_string(best->photons) + " photons, " +
               std::to_string(best->cones) + " cones, " + std::to_string(best->spp) + " spp\n" +
-              "  predicted relMSE " + fmt("%.4g", best->error) + " = pixel noise " + fmt("%.3g", noise) +
+              "  predicted relMSE " + fmt("%.4g", best->error()) + " = pixel noise " + fmt("%.3g", noise) +
               " + photon noise " + fmt("%.3g", photonNoise) + " + level bias " + fmt("%.3g", lb) + " + cone bias " +
               fmt("%.3g", cb) + (byError ? " (target " + fmt("%.4g", req.targetRelMse) + ")" : std::string()) + "\n" +
               "  predicted time " + fmt("%.2f", best->seconds) + " s" +

@@ -128,6 +128,23 @@ TEST(MetricsCompare, HandComputed2x2) {
   EXPECT_NE(compareImages(ref, test).relMse, m.relMse);
 }
 
+TEST(MetricsCompare, RelMseOfEstimatesHandComputed2x2) {
+  // The images of HandComputed2x2. Means of the pairs: 1.125 and 0.0625 (the 0.5s are equal).
+  // (0.25^2 / (1.125^2 + 0.01) x3 + 0.125^2 / (0.0625^2 + 0.01) x3) / 12
+  //   = (3 x 0.0625 / 1.275625 + 3 x 0.015625 / 0.01390625) / 12
+  //   = (0.146986771190... + 3.370786516853...) / 12 = 0.293147774003...
+  Image a(2, 2, Vec3(0.5f)), b(2, 2, Vec3(0.5f));
+  a.at(0, 0) = Vec3(1.0f);
+  b.at(0, 0) = Vec3(1.25f);
+  a.at(1, 0) = Vec3(0.0f);
+  b.at(1, 0) = Vec3(0.125f);
+  const double expected = (3.0 * 0.0625 / 1.275625 + 3.0 * 0.015625 / 0.01390625) / 12.0;
+  EXPECT_NEAR(relMseOfEstimates(a, b), expected, 1e-14);
+  EXPECT_DOUBLE_EQ(relMseOfEstimates(a, b), relMseOfEstimates(b, a));  // symmetric
+  EXPECT_EQ(relMseOfEstimates(a, a), 0.0);
+  EXPECT_THROW(relMseOfEstimates(a, Image(3, 2)), ImageError);
+}
+
 TEST(MetricsCompare, IdenticalImages) {
   const Image im = randomCodes(32, 24, 7);
   const ImageMetrics m = compareImages(im, im);

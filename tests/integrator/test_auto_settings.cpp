@@ -3,6 +3,7 @@
 
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
+#include "voxcone/image/metrics.h"
 #include "voxcone/integrator/auto_settings.h"
 #include "voxcone/integrator/integrator.h"
 
@@ -19,24 +20,21 @@
 namespace voxcone {
 namespace {
 
-RenderSettings smallSettings(const Scene& scene) {
-  RenderSettings s = scene.render;
-  s.width = s.height = 48;
-  s.method = "voxcone";
-  s.seed = 3;
-  return s;
-}
-
-/// relMSE of two renders against their mean (as the pilot measures it).
-double symmetricRelMse(const Image& a, const Image& b) {
-  double sum = 0.0;
-  for (size_t i = 0; i < a.pixels.size(); ++i)
-    for (int c = 0; c < 3; ++c) {
-      const double x = a.pixels[i][c], y = b.pixels[i][c], m = 0.5 * (x + y);
-      sum += (x - y) * (x - y) / (m * m + 1e-2);
-    }
-  return sum / (3.0 * a.pixels.size());
-}
+/// The cornell-box, its HBVH and 48x48 voxcone settings: what every pilot test chooses for.
+struct PilotScene {
+  Scene scene = test::cornellBox();
+  Hbvh accel{scene};
+  RenderSettings settings = [this] {
+    RenderSettings s = scene.render;
+    s.width = s.height = 48;
+    s.method = "voxcone";
+    s.seed = 3;
+    return s;
+  }();
+  AutoSettingsResult choose(const AutoSettingsRequest& req) const {
+    return chooseVoxconeSettings(scene, accel, settings, req);
+  }
+};
 
 Image renderChosen(const Scene& scene, const Accel& accel, RenderSettings s, const AutoSettingsResult& r,
                    uint64_t seed, int photonSeed) {
@@ -51,12 +49,10 @@ Image renderChosen(const Scene& scene, const Accel& accel, RenderSettings s, con
 }
 
 TEST(AutoSettings, PredictedNoiseMatchesRendersOfTheChosenSettings) {
-  const Scene scene = test::cornellBox();
-  const Hbvh accel(scene);
-  const RenderSettings s = smallSettings(scene);
+  const PilotScene p;
   AutoSettingsRequest req;
   req.targetRelMse = 0.02;
-  const AutoSettingsResult r = chooseVoxconeSettings(scene, accel, s, req);
+  const AutoSettingsResult r = p.choose(req);
   ASSERT_TRUE(r.met);
   EXPECT_LE(r.predictedRelMse, 0.02);
   const nlohmann::json& terms = r.report["predicted_terms"];
@@ -66,59 +62,56 @@ TEST(AutoSettings, PredictedNoiseMatchesRendersOfTheChosenSettings) {
               r.predictedRelMse, 1e-12);
   // Two renders of the choice with other pixel and photon seeds than the pilot's: half their
   // relMSE is the noise the pilot predicted (its level and cone biases are the same in both).
-  const Image a = renderChosen(scene, accel, s, r, 101, 7), b = renderChosen(scene, accel, s, r, 202, 9);
-  const double measured = symmetricRelMse(a, b) / 2.0;
+  const Image a = renderChosen(p.scene, p.accel, p.settings, r, 101, 7);
+  const Image b = renderChosen(p.scene, p.accel, p.settings, r, 202, 9);
+  const double measured = relMseOfEstimates(a, b) / 2.0;
   EXPECT_GT(measured, noise / 2.0) << "predicted " << noise;
   EXPECT_LT(measured, noise * 2.0) << "predicted " << noise;
 }
 
 TEST(AutoSettings, TighterTargetsCostMoreAndFixedSettingsAreKept) {
-  const Scene scene = test::cornellBox();
-  const Hbvh accel(scene);
-  const RenderSettings s = smallSettings(scene);
+  const PilotScene p;
   AutoSettingsRequest loose, tight;
   loose.targetRelMse = 0.05;
   tight.targetRelMse = 0.005;
-  const AutoSettingsResult l = chooseVoxconeSettings(scene, accel, s, loose);
-  const AutoSettingsResult t = chooseVoxconeSettings(scene, accel, s, tight);
+  const AutoSettingsResult l = p.choose(loose);
+  const AutoSettingsResult t = p.choose(tight);
   EXPECT_LE(l.predictedSeconds, t.predictedSeconds);
   EXPECT_LE(l.spp, t.spp);
   EXPECT_LE(t.predictedRelMse, l.predictedRelMse);
   // A target no setting can meet: the most accurate is chosen and says so.
   AutoSettingsRequest impossible;
   impossible.targetRelMse = 1e-9;
-  const AutoSettingsResult i = chooseVoxconeSettings(scene, accel, s, impossible);
+  const AutoSettingsResult i = p.choose(impossible);
   EXPECT_FALSE(i.met);
   EXPECT_NE(i.summary.find("closest"), std::string::npos);
   // The user's own level and spp are not chosen.
   AutoSettingsRequest fixed = loose;
   fixed.fixedOptions = {{"level", 6}, {"exact_segment", 16}};
   fixed.fixedSpp = 2;
-  const AutoSettingsResult f = chooseVoxconeSettings(scene, accel, s, fixed);
+  const AutoSettingsResult f = p.choose(fixed);
   EXPECT_EQ(f.options["level"], 6);
   EXPECT_EQ(f.options["exact_segment"], 16);
   EXPECT_EQ(f.spp, 2);
   // A budget: the prediction fits what the pilot left of it.
   AutoSettingsRequest budget;
   budget.timeBudget = 30.0;
-  const AutoSettingsResult b = chooseVoxconeSettings(scene, accel, s, budget);
+  const AutoSettingsResult b = p.choose(budget);
   ASSERT_TRUE(b.met);
   EXPECT_LE(b.predictedSeconds, 30.0 - b.pilotSeconds);
 }
 
 TEST(AutoSettings, BadRequestsAreErrors) {
-  const Scene scene = test::cornellBox();
-  const Hbvh accel(scene);
-  const RenderSettings s = smallSettings(scene);
+  const PilotScene p;
   AutoSettingsRequest none, both;
   both.targetRelMse = 0.01;
   both.timeBudget = 10.0;
-  EXPECT_THROW(chooseVoxconeSettings(scene, accel, s, none), SettingsError);
-  EXPECT_THROW(chooseVoxconeSettings(scene, accel, s, both), SettingsError);
+  EXPECT_THROW(p.choose(none), SettingsError);
+  EXPECT_THROW(p.choose(both), SettingsError);
   AutoSettingsRequest badLevel;
   badLevel.targetRelMse = 0.01;
   badLevel.fixedOptions = {{"level", "six"}};
-  EXPECT_THROW(chooseVoxconeSettings(scene, accel, s, badLevel), SettingsError);
+  EXPECT_THROW(p.choose(badLevel), SettingsError);
 }
 
 class AutoSettingsCli : public test::TempDirTest {};

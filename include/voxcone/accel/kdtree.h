@@ -69,8 +69,12 @@ public:
 
 private:
   struct Builder;
-  /// The ray's parametric range inside the root box, or false when it misses.
-  bool clipToBounds(const Ray& ray, float& t0, float& t1) const;
+  /// The ray's parametric range [t0, t1] inside the root box and (tMin, tMax), or false when
+  /// it misses.
+  bool clipToBounds(const Ray& ray, const float invDir[3], float tMax, float& t0, float& t1) const;
+  /// Front-to-back traversal: the closest hit below tMax into `hit`, or (kAnyHit) any hit.
+  template <bool kAnyHit>
+  bool traverse(const Ray& ray, float tMax, Hit& hit) const;
 
   KdTreeBuildSettings m_settings;
   KdTreeStats m_stats;

@@ -4,6 +4,7 @@
 /// Intersection", JCGT 2(1)): rays through shared edges and vertices hit exactly one of the
 /// triangles, never fall through a crack.
 
+#include "voxcone/core/bounds.h"
 #include "voxcone/core/ray.h"
 
 #include <cstdint>
@@ -18,6 +19,17 @@ struct alignas(16) Triangle4 {
   float v[3][3][4];  ///< [vertex][axis][lane]
   uint32_t id[4];    ///< original triangle index per lane
 };
+
+/// The bounds of triangle t, or false when an index is out of range or a vertex is not finite
+/// (such triangles are left out of every structure).
+inline bool triangleBounds(const std::vector<Vec3>& pos, const UVec3& t, Bounds3& out) {
+  if (t.x >= pos.size() || t.y >= pos.size() || t.z >= pos.size()) return false;
+  out = Bounds3();
+  out.extend(pos[t.x]);
+  out.extend(pos[t.y]);
+  out.extend(pos[t.z]);
+  return isFinite(out.lo) && isFinite(out.hi);
+}
 
 /// Append the triangles ids[0..count) to `out`, four to a packet.
 inline void packTriangles(const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, const uint32_t* ids,

@@ -37,6 +37,13 @@ constexpr double kRelMseEpsilon = 1e-2;
 /// Compare; throws ImageError if the sizes differ or either is empty.
 ImageMetrics compareImages(const Image& test, const Image& reference);
 
+/// relMSE of two estimates of the same image against their mean: mean over pixels and channels
+/// of (a - b)^2 / (((a + b) / 2)^2 + eps). Symmetric, unlike compareImages' relMSE against a
+/// reference: a pixel near zero in one noisy estimate (a light's edge missed by every sample)
+/// does not count thousands of times over. For two independent estimates it is about twice the
+/// relMSE of one against the truth. Throws ImageError if the sizes differ or either is empty.
+double relMseOfEstimates(const Image& a, const Image& b);
+
 /// False-colour map of the per-pixel relative squared error (mean over channels of
 /// (t-r)^2/(r^2+eps)) on a perceptually ordered colour ramp, scaled so that `maxError` maps to
 /// the top of the ramp (maxError <= 0: the 99th percentile of the image).
