@@ -227,7 +227,7 @@ struct RaySet {
 
 /// Surface points hit by the primary rays, for the secondary and shadow sets.
 struct SurfacePoint {
-  Vec3 pos, geomNormal, incoming;
+  Vec3 pos, posError, geomNormal, incoming;
 };
 
 /// (a) Primary rays: a pinhole camera on +z looking at the bbox centre, framing the mesh.
@@ -284,10 +284,11 @@ std::vector<SurfacePoint> primaryHits(const Hbvh& bvh, const TriangleMesh& mesh,
     const UVec3& tri = mesh.triangles[hit->triangle];
     const Vec3 p0 = mesh.positions[tri.x], p1 = mesh.positions[tri.y], p2 = mesh.positions[tri.z];
     // Barycentric interpolation is more accurate than origin + t dir far from the camera.
-    const Vec3 p = (1.0f - hit->b1 - hit->b2) * p0 + hit->b1 * p1 + hit->b2 * p2;
+    Vec3 pError;
+    const Vec3 p = barycentricPoint(p0, p1, p2, 1.0f - hit->b1 - hit->b2, hit->b1, hit->b2, pError);
     const Vec3 ng = glm::normalize(glm::cross(p1 - p0, p2 - p0));
     if (!isFinite(ng)) continue;
-    pts.push_back({p, ng, r.dir});
+    pts.push_back({p, pError, ng, r.dir});
   }
   return pts;
 }
@@ -300,7 +301,7 @@ RaySet secondaryRays(const std::vector<SurfacePoint>& pts, uint64_t seed) {
   for (const SurfacePoint& sp : pts) {
     const Vec3 n = glm::dot(sp.geomNormal, sp.incoming) < 0.0f ? sp.geomNormal : -sp.geomNormal;
     const Vec3 d = Frame(n).toWorld(sampleCosineHemisphere(rng.uniform2()));
-    set.rays.push_back(spawnRay(sp.pos, sp.geomNormal, d));
+    set.rays.push_back(spawnRay(sp.pos, sp.posError, sp.geomNormal, d));
   }
   return set;
 }
@@ -316,7 +317,7 @@ RaySet occlusionRays(const std::vector<SurfacePoint>& pts, const Bounds3& box, u
   for (const SurfacePoint& sp : pts) {
     const Vec2 u = rng.uniform2();
     const Vec3 target(c.x + (u.x - 0.5f) * 0.25f * ext.x, lightY, c.z + (u.y - 0.5f) * 0.25f * ext.z);
-    set.rays.push_back(spawnRayTo(sp.pos, sp.geomNormal, target));
+    set.rays.push_back(spawnRayTo(sp.pos, sp.posError, sp.geomNormal, target));
   }
   return set;
 }

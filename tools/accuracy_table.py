@@ -5,7 +5,8 @@
                             [--figure-photons N] [--quick] [--res WxH]
 
 Rows: voxcone (defaults at 4, 16 and 64 spp; 16 narrower cones; gather = hit with 16 cones),
-pm (defaults, 16 spp) and a path-tracing ladder (4 ... 1024 spp). For every row that is not
+pm (defaults, 16 spp) and two path-tracing ladders (4 ... 1024 spp): the default (Owen-scrambled
+Sobol) sampler and the independent one, so that the sampler's gain is measured in the same run. For every row that is not
 path it gives the time path needs to reach the same relMSE, interpolated log-log between the
 two path renders around it ('>' or '<' where it lies outside the ladder: extrapolated), and,
 for the target PSNR, the time path and voxcone (defaults) need to reach it (interpolated
@@ -34,15 +35,15 @@ def run(cmd):
     return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
 
 
-def render(args, name, method, spp, options):
+def render(args, name, method, spp, options, sampler="sobol"):
     out = os.path.join(args.outdir, name + ".exr")
     cmd = [args.bin, "render", args.scene, "--method", method, "--spp", str(spp), "-t", str(args.threads), "-q",
-           "-o", out, "--options", json.dumps(options)]
+           "-o", out, "--options", json.dumps(options), "--sampler", sampler]
     run(cmd + (["--res", args.res] if args.res else []))
     with open(os.path.join(args.outdir, name + ".json")) as f:
         sidecar = json.load(f)
     metrics = json.loads(run([args.bin, "compare", out, args.reference, "--json"]))
-    return {"name": name, "method": method, "spp": spp, "options": options,
+    return {"name": name, "method": method, "sampler": sampler, "spp": spp, "options": options,
             "seconds": sidecar["timings"]["total_seconds"], "relmse": metrics["relmse"],
             "psnr_srgb8": metrics["psnr_srgb8"], "relerr_p99": metrics["relerr_p99"], "exr": out}
 
@@ -104,15 +105,18 @@ def main():
         # relMSE falls with time: below the ladder's smallest relMSE path needs more time.
         r["path_seconds_same_relmse"] = t
         r["path_extrapolated"] = {"<": ">", ">": "<", "in": ""}[where]
-    rows += paths
+    independent = [render(args, "path-independent%d" % spp, "path", spp, {}, "independent") for spp in path_spp]
+    rows += paths + independent
 
     target = {"db": args.target_db}
     path_t, path_where = interpolate(paths, args.target_db, "psnr_srgb8", "seconds", False, True)
+    indep_t, indep_where = interpolate(independent, args.target_db, "psnr_srgb8", "seconds", False, True)
     vc = [r for r in rows if r["name"] in voxcone_default]
     vc_t, vc_where = interpolate(vc, args.target_db, "psnr_srgb8", "seconds", False, True)
     target.update({"path_seconds": path_t, "path_extrapolated": path_where != "in",
                    "voxcone_seconds": vc_t, "voxcone_extrapolated": vc_where != "in",
-                   "ratio": vc_t / path_t})
+                   "ratio": vc_t / path_t, "path_independent_seconds": indep_t,
+                   "path_independent_extrapolated": indep_where != "in"})
 
     figure = None
     if args.figure_photons > 0:
@@ -137,7 +141,7 @@ def main():
     for r in rows:
         same = r.get("path_seconds_same_relmse")
         lines.append("| %s | %d | %s | %.2f | %.5f | %.2f | %s | %s |" % (
-            r["method"], r["spp"], json.dumps(r["options"]) if r["options"] else "defaults", r["seconds"], r["relmse"],
+            r["method"] + ("" if r["sampler"] == "sobol" else " (%s)" % r["sampler"]), r["spp"], json.dumps(r["options"]) if r["options"] else "defaults", r["seconds"], r["relmse"],
             r["psnr_srgb8"], "" if same is None else "%s%.2f" % (r["path_extrapolated"], same),
             "" if same is None else "%.2f" % (same / r["seconds"])))
     lines.append("")
@@ -145,6 +149,9 @@ def main():
                  "(target: at most 0.1x)." % (args.target_db, "~" if target["path_extrapolated"] else "",
                                                 path_t, "~" if target["voxcone_extrapolated"] else "", vc_t,
                                                 target["ratio"]))
+    lines.append("Path's time to %.1f dB by sampler: sobol %s%.2f s, independent %s%.2f s (sobol takes %.2fx the "
+                 "time)." % (args.target_db, "~" if target["path_extrapolated"] else "", path_t,
+                             "~" if target["path_independent_extrapolated"] else "", indep_t, path_t / indep_t))
     if figure:
         lines.append("Figure (%d photons, 16 spp, error scale %.4g): pm relMSE %.5f, voxcone relMSE %.5f." % (
             figure["photons"], figure["error_scale"], figure["renders"][0]["relmse"], figure["renders"][1]["relmse"]))

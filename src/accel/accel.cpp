@@ -35,7 +35,7 @@ std::unique_ptr<Accel> buildAccel(const std::string& kind, const Scene& scene, P
 bool intersectSurface(const Scene& scene, const Accel& accel, const Ray& ray, SurfaceHit& out) {
   const std::optional<Hit> hit = accel.intersect(ray);
   if (!hit) return false;
-  out = scene.surfaceAt(hit->triangle, ray.at(hit->t), hit->b1, hit->b2);
+  out = scene.surfaceAt(hit->triangle, hit->b1, hit->b2);
   return true;
 }
 

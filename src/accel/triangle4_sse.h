@@ -62,7 +62,27 @@ inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri
   int mask = _mm_movemask_ps(valid) & ~zeroLanes;
   if (mask) {
     const __m128 invDet = _mm_div_ps(_mm_set1_ps(1.0f), det);
-    _mm_storeu_ps(tOut, _mm_mul_ps(tScaled, invDet));
+    const __m128 t = _mm_mul_ps(tScaled, invDet);
+    // Only distances above their own rounding error (watertightDistanceError, lane by lane).
+    const auto abs4 = [&](__m128 a) { return _mm_andnot_ps(signMask, a); };
+    const auto max3 = [&](__m128 a, __m128 b, __m128 c) { return _mm_max_ps(abs4(a), _mm_max_ps(abs4(b), abs4(c))); };
+    const __m128 maxZ = _mm_mul_ps(max3(pz[0], pz[1], pz[2]), abs4(rt.sz));
+    const __m128 maxX = max3(px[0], px[1], px[2]);
+    const __m128 maxY = max3(py[0], py[1], py[2]);
+    const __m128 maxE = max3(u, v, w);
+    const __m128 g2 = _mm_set1_ps(errorGamma(2)), g3 = _mm_set1_ps(errorGamma(3)), g5 = _mm_set1_ps(errorGamma(5));
+    const __m128 deltaZ = _mm_mul_ps(g3, maxZ);
+    const __m128 deltaX = _mm_mul_ps(g5, _mm_add_ps(maxX, maxZ));
+    const __m128 deltaY = _mm_mul_ps(g5, _mm_add_ps(maxY, maxZ));
+    const __m128 deltaE = _mm_mul_ps(
+        _mm_set1_ps(2.0f), _mm_add_ps(_mm_add_ps(_mm_mul_ps(g2, _mm_mul_ps(maxX, maxY)), _mm_mul_ps(deltaY, maxX)),
+                                      _mm_mul_ps(deltaX, maxY)));
+    const __m128 deltaT = _mm_mul_ps(
+        _mm_mul_ps(_mm_set1_ps(3.0f), _mm_add_ps(_mm_add_ps(_mm_mul_ps(g3, _mm_mul_ps(maxE, maxZ)), _mm_mul_ps(deltaE, maxZ)),
+                                                 _mm_mul_ps(deltaZ, maxE))),
+        abs4(invDet));
+    mask &= _mm_movemask_ps(_mm_cmpgt_ps(t, deltaT));
+    _mm_storeu_ps(tOut, t);
     _mm_storeu_ps(b1Out, _mm_mul_ps(v, invDet));
     _mm_storeu_ps(b2Out, _mm_mul_ps(w, invDet));
   }

@@ -30,6 +30,7 @@ struct RenderOptions {
   int maxDepth = 0;
   std::string integratorOptions = "{}";
   std::string accel = "hbvh";
+  std::string sampler;
   double targetError = 0.0;
   double timeBudget = 0.0;
   bool quiet = false;
@@ -68,6 +69,7 @@ void runRender(const RenderOptions& o) {
   if (!o.resolution.empty()) parseResolution(o.resolution, settings);
   if (o.seed >= 0) settings.seed = static_cast<uint64_t>(o.seed);
   if (o.maxDepth != 0) settings.maxDepth = o.maxDepth;
+  if (!o.sampler.empty()) settings.sampler = samplerKindFromName(o.sampler);
   settings.validate();
 
   nlohmann::json options;
@@ -130,7 +132,8 @@ void runRender(const RenderOptions& o) {
   meta["scene"] = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName : o.scenePath;
   meta["method"] = settings.method;
   meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
-                      {"max_depth", settings.maxDepth}, {"seed", settings.seed}, {"threads", threads.threads()},
+                      {"max_depth", settings.maxDepth}, {"seed", settings.seed},
+                      {"sampler", samplerNames()[size_t(settings.sampler)]}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
   meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"pilot_seconds", pilotSec},
@@ -167,6 +170,8 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--spp", o->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 24));
   cmd->add_option("--res", o->resolution, "Resolution WIDTHxHEIGHT");
   cmd->add_option("--seed", o->seed, "Random seed")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--sampler", o->sampler, "Pixel sampler: sobol (default; Owen-scrambled) or independent")
+      ->check(CLI::IsMember(samplerNames()));
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024));
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");

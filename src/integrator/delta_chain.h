@@ -3,27 +3,27 @@
 // src/integrator).
 
 #include "voxcone/accel/accel.h"
-#include "voxcone/core/rng.h"
+#include "voxcone/core/sampler.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
 namespace voxcone {
 
-/// Radiance along `ray`: emission at every hit (when `withEmission`), `shade(hit, wo, rng)` at
+/// Radiance along `ray`: emission at every hit (when `withEmission`), `shade(hit, wo, sampler)` at
 /// the first non-delta surface, and at delta surfaces every lobe followed (reflection and
 /// refraction both, for glass) up to `maxDepth` segments. Splitting at every dielectric
 /// doubles the rays per level, so branches whose accumulated weight (`throughput`, the largest
 /// channel of the product of lobe weights) falls below 1/1000 are dropped: they cannot change
 /// the pixel visibly.
 template <typename Shade>
-Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Rng& rng, int maxDepth,
+Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sampler& sampler, int maxDepth,
                       bool withEmission, const Shade& shade, int depth = 0, float throughput = 1.0f) {
   SurfaceHit sh;
   if (!intersectSurface(scene, accel, ray, sh)) return Vec3(0.0f);
   const Vec3 woWorld = -glm::normalize(ray.dir);
   Vec3 L = withEmission ? scene.emitted(sh, woWorld) : Vec3(0.0f);
   const Material& mat = scene.materials[sh.material];
-  if (!mat.isDelta()) return L + shade(sh, woWorld, rng);
+  if (!mat.isDelta()) return L + shade(sh, woWorld, sampler);
   if (depth + 1 >= maxDepth) return L;
   const Frame frame(sh.shadingNormal);
   DeltaLobe lobes[2];
@@ -31,9 +31,9 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Rn
   for (int i = 0; i < n; ++i) {
     const float branch = throughput * maxComponent(lobes[i].weight);
     if (branch < 1e-3f) continue;
-    const Ray next = spawnRay(sh.position, sh.geomNormal, frame.toWorld(lobes[i].wi));
+    const Ray next = spawnRay(sh.position, sh.positionError, sh.geomNormal, frame.toWorld(lobes[i].wi));
     L += lobes[i].weight *
-         traceDeltaChains(scene, accel, next, rng, maxDepth, withEmission, shade, depth + 1, branch);
+         traceDeltaChains(scene, accel, next, sampler, maxDepth, withEmission, shade, depth + 1, branch);
   }
   return L;
 }

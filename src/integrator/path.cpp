@@ -11,12 +11,13 @@ PathIntegrator::PathIntegrator(const IntegratorContext& c)
     : m_scene(c.scene), m_accel(c.accel), m_maxDepth(c.settings.maxDepth) {
   OptionReader r(c.options, "path");
   m_rrDepth = r.integer("rr_depth", 3, 0, 1024);
+  m_nee = r.choice("light_sampling", {"nee", "none"}) == "nee";
   r.finish();
 }
 
-nlohmann::json PathIntegrator::settingsJson() const { return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}}; }
+nlohmann::json PathIntegrator::settingsJson() const { return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}, {"light_sampling", m_nee ? "nee" : "none"}}; }
 
-Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
+Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
   Vec3 L(0.0f), beta(1.0f);
   Ray ray = cameraRay;
   bool specularBounce = true;  // the camera vertex acts as a delta
@@ -33,7 +34,7 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
     // Emission found by BSDF sampling, MIS-weighted against light sampling.
     const Vec3 Le = m_scene.emitted(sh, woWorld);
     if (!isBlack(Le)) {
-      if (specularBounce) {
+      if (specularBounce || !m_nee) {
         L += beta * Le;
       } else {
         const float lightPdf = m_scene.lightPdf(prevPos, sh.triangle, pos, sh.geomNormal);
@@ -47,14 +48,12 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
     const Vec3 wo = frame.toLocal(woWorld);
 
     // Next-event estimation: one light sample, MIS-weighted against BSDF sampling.
-    if (!mat.isDelta()) {
-      const float uc = rng.uniform();
-      const Vec2 ul = rng.uniform2();
-      const LightSample ls = m_scene.sampleLight(pos, uc, ul);
+    if (m_nee && !mat.isDelta()) {
+      const LightSample ls = m_scene.sampleLight(pos, sampler.uniform2());
       if (ls.pdf > 0.0f) {
         const Vec3 wi = frame.toLocal(ls.wi);
         const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
-        if (!isBlack(f) && !m_accel.occluded(spawnRayTo(pos, sh.geomNormal, ls.lightPos))) {
+        if (!isBlack(f) && !m_accel.occluded(spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal))) {
           const float w = ls.delta ? 1.0f : powerHeuristic(ls.pdf, bsdfPdf(mat, wo, wi));
           L += beta * f * ls.radiance * (w / ls.pdf);
         }
@@ -63,21 +62,21 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Rng& rng) const {
 
     // Continue the path by sampling the BSDF.
     BsdfSample bs;
-    if (!bsdfSampleFrom(mat, wo, rng, bs)) break;
+    if (!bsdfSampleFrom(mat, wo, sampler, bs)) break;
     beta *= bs.weight;
     specularBounce = bs.delta;
     prevPdf = bs.pdf;
     prevPos = pos;
     if (bs.transmission) etaScale *= sqr(bs.eta);
     const Vec3 wiWorld = frame.toWorld(bs.wi);
-    ray = spawnRay(pos, sh.geomNormal, wiWorld);
+    ray = spawnRay(pos, sh.positionError, sh.geomNormal, wiWorld);
 
     // Russian roulette on the throughput without the radiance scaling of refraction
     // (pbrt-v4, PathIntegrator::Li).
     const Vec3 rrBeta = beta * etaScale;
     if (depth >= m_rrDepth && maxComponent(rrBeta) < 1.0f) {
       const float q = std::max(0.0f, 1.0f - maxComponent(rrBeta));
-      if (rng.uniform() < q) break;
+      if (sampler.uniform() < q) break;
       beta /= 1.0f - q;
     }
   }

@@ -109,7 +109,7 @@ Vec3 PhotonMappingIntegrator::estimate(const PhotonKdTree& tree, const std::vect
   return sum / (kPi * r2);
 }
 
-Vec3 PhotonMappingIntegrator::gather(Ray ray, Rng& rng, int depth) const {
+Vec3 PhotonMappingIntegrator::gather(Ray ray, Sampler& sampler, int depth) const {
   Vec3 beta(1.0f), L(0.0f);
   // Emission found right from the gather origin or through delta bounces from it is direct
   // light or a caustic there (both estimated otherwise); it counts only when reached by delta
@@ -128,21 +128,21 @@ Vec3 PhotonMappingIntegrator::gather(Ray ray, Rng& rng, int depth) const {
                          estimate(m_causticTree, m_maps.caustic, false, sh, woWorld));
     // Glossy: no photons are stored here; direct light by a shadow ray, then continue.
     if (!mat.isDelta()) {
-      L += beta * estimateDirectLight(m_scene, m_accel, sh, woWorld, rng, 1);
+      L += beta * estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, 1);
       seenGlossy = true;
     }
     if (depth + 1 >= m_maxDepth) break;
     const Frame frame(sh.shadingNormal);
     BsdfSample bs;
-    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), rng, bs)) break;
+    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), sampler, bs)) break;
     beta *= bs.weight;
     countEmission = seenGlossy && bs.delta;
-    ray = spawnRay(pos, sh.geomNormal, frame.toWorld(bs.wi));
+    ray = spawnRay(pos, sh.positionError, sh.geomNormal, frame.toWorld(bs.wi));
   }
   return L;
 }
 
-Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
+Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
   Vec3 L(0.0f), beta(1.0f);
   Ray ray = cameraRay;
   // Emission counts when seen from the camera or through a delta bounce: right after a glossy
@@ -158,7 +158,7 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
 
     if (!mat.isDelta()) {
       // Direct light by shadow rays (Jensen eq. 9.8, L_l).
-      L += beta * estimateDirectLight(m_scene, m_accel, sh, woWorld, rng, 1);
+      L += beta * estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, 1);
       if (mat.isDiffuse()) {
         // Caustics from the caustic map (L_c), then indirect diffuse light (L_d).
         Vec3 Lr = estimate(m_causticTree, m_maps.caustic, false, sh, woWorld);
@@ -171,11 +171,11 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
           const float flip = wo.z < 0.0f ? -1.0f : 1.0f;  // gather on the viewer's side
           Vec3 sum(0.0f);
           for (int i = 0; i < m_finalGather; ++i) {
-            Vec3 wi = sampleCosineHemisphere(rng.uniform2());
+            Vec3 wi = sampleCosineHemisphere(sampler.uniform2());
             wi.z *= flip;
             const Vec3 f = bsdfEval(mat, wo, wi);
             if (isBlack(f)) continue;
-            sum += f * kPi * gather(spawnRay(pos, sh.geomNormal, frame.toWorld(wi)), rng, depth + 1);
+            sum += f * kPi * gather(spawnRay(pos, sh.positionError, sh.geomNormal, frame.toWorld(wi)), sampler, depth + 1);
           }
           Lr += sum / static_cast<float>(m_finalGather);
         }
@@ -189,10 +189,10 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Rng& rng) const {
     // Delta or glossy bounce: sample the BSDF with the pixel's stream.
     const Frame frame(sh.shadingNormal);
     BsdfSample bs;
-    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), rng, bs)) break;
+    if (!bsdfSampleFrom(mat, frame.toLocal(woWorld), sampler, bs)) break;
     beta *= bs.weight;
     countEmission = bs.delta;
-    ray = spawnRay(pos, sh.geomNormal, frame.toWorld(bs.wi));
+    ray = spawnRay(pos, sh.positionError, sh.geomNormal, frame.toWorld(bs.wi));
   }
   return L;
 }

@@ -30,13 +30,15 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     uint64_t bad = 0;
     for (int y = y0; y < std::min(y0 + kTile, h); ++y)
       for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
-        Rng rng(settings.seed, static_cast<uint64_t>(y) * static_cast<uint64_t>(w) + static_cast<uint64_t>(x));
+        Sampler sampler(settings.sampler, settings.seed,
+                        static_cast<uint64_t>(y) * static_cast<uint64_t>(w) + static_cast<uint64_t>(x));
         // Sum in double so the mean does not depend on float rounding of a long sum.
         DVec3 sum(0.0);
         for (int s = 0; s < settings.spp; ++s) {
-          const Vec2 jitter = rng.uniform2();
+          sampler.startSample(static_cast<uint32_t>(s));
+          const Vec2 jitter = sampler.uniform2();
           const Ray ray = scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, w, h);
-          const Vec3 L = integrator.li(ray, rng);
+          const Vec3 L = integrator.li(ray, sampler);
           if (!isFinite(L) || L.x < 0.0f || L.y < 0.0f || L.z < 0.0f) {
             ++bad;
             continue;

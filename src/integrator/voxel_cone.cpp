@@ -122,21 +122,23 @@ void VoxelConeIntegrator::prepare(Progress* progress) {
   setField(std::move(field));
 }
 
-std::optional<VoxelConeIntegrator::AxisHit> VoxelConeIntegrator::hitAlongAxis(const Vec3& p, const Vec3& n,
-                                                                             const Vec3& d, float tMax) const {
-  Ray ray = spawnRay(p, n, d);
+std::optional<VoxelConeIntegrator::AxisHit> VoxelConeIntegrator::hitAlongAxis(const Vec3& p, const Vec3& pError,
+                                                                             const Vec3& n, const Vec3& d,
+                                                                             float tMax) const {
+  Ray ray = spawnRay(p, pError, n, d);
   ray.tMax = tMax;
   const std::optional<Hit> hit = m_accel.intersect(ray);
   if (!hit) return std::nullopt;
   AxisHit out;
   out.t = hit->t;
-  out.position = ray.at(hit->t);
-  const Vec3 ng = m_scene.surfaceAt(hit->triangle, out.position, hit->b1, hit->b2).geomNormal;
-  out.side = glm::dot(ng, d) < 0.0f ? ng : -ng;
+  const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, hit->b1, hit->b2);
+  out.position = sh.position;
+  out.side = glm::dot(sh.geomNormal, d) < 0.0f ? sh.geomNormal : -sh.geomNormal;
   return out;
 }
 
-Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const {
+Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
+                                    float tanHalf) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -151,7 +153,7 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d,
   Vec3 hitRadiance(0.0f);
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
-    const std::optional<AxisHit> hit = hitAlongAxis(p, n, d, m_maxDistance);
+    const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
     const float v = std::clamp(hit->t * tanHalf, m_v0, vMax);
     return m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
@@ -159,7 +161,7 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d,
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
-    if (const std::optional<AxisHit> hit = hitAlongAxis(p, n, d, m_exactSegment * m_v0)) {
+    if (const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_exactSegment * m_v0)) {
       hitSurface = true;
       // The finest level around the hit, half a voxel towards the ray's side.
       hitRadiance = m_field.coneSample(hit->position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
@@ -210,7 +212,7 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& n, const Vec3& d,
   return C;
 }
 
-Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const {
+Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler) const {
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in traceCone).
@@ -219,7 +221,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
     return m_field.coneSample(sh.position, float(m_finest), -woWorld, viewFrom(woWorld, m_v0)).radiance;
   Vec3 L(0.0f);
   if (m_view == View::Full || m_view == View::Direct)
-    L += estimateDirectLight(m_scene, m_accel, sh, woWorld, rng, m_lightSamples);
+    L += estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_lightSamples);
   if (m_view == View::Direct) return L;
   // The side of the surface the viewer is on.
   const bool front = glm::dot(sh.geomNormal, woWorld) >= 0.0f;
@@ -231,7 +233,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
     if (m_view == View::Caustic) return L;
     // The cone set turned by a random angle about the normal; each cone weighted by
     // f(wo, axis) * pi * w_i, which is albedo * w_i for a Lambertian surface.
-    const float rotation = 2.0f * kPi * rng.uniform();
+    const float rotation = 2.0f * kPi * sampler.uniform();
     const float cr = std::cos(rotation), sr = std::sin(rotation);
     const Frame geo(ng);
     for (const Cone& cone : m_cones.cones()) {
@@ -239,29 +241,29 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& 
           Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
       const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
       if (isBlack(f)) continue;
-      L += f * cone.weight * traceCone(sh.position, ng, d, m_tanHalf);
+      L += f * cone.weight * traceCone(sh.position, sh.positionError, ng, d, m_tanHalf);
     }
     return L;
   }
   if (m_view == View::Caustic) return L;
   // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
   BsdfSample bs;
-  if (!bsdfSampleFrom(mat, wo, rng, bs)) return L;
+  if (!bsdfSampleFrom(mat, wo, sampler, bs)) return L;
   const Vec3 d = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
   // Roughness is in (0, 1]. Below 0.01 the cone would stay one finest voxel wide for over 100
   // steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
-  L += bs.weight * traceCone(sh.position, side, d, tanHalf);
+  L += bs.weight * traceCone(sh.position, sh.positionError, side, d, tanHalf);
   return L;
 }
 
-Vec3 VoxelConeIntegrator::li(const Ray& ray, Rng& rng) const {
+Vec3 VoxelConeIntegrator::li(const Ray& ray, Sampler& sampler) const {
   if (!m_prepared) throw Error("voxcone: li() before prepare()");
   // Emission is seen directly or through delta bounces (shadow rays sample it elsewhere).
   const bool emission = m_view == View::Full || m_view == View::Direct;
-  return traceDeltaChains(m_scene, m_accel, ray, rng, m_maxDepth, emission,
-                          [this](const SurfaceHit& sh, const Vec3& wo, Rng& r) { return shade(sh, wo, r); });
+  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, emission,
+                          [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px) { return shade(sh, wo, px); });
 }
 
 }  // namespace voxcone

@@ -18,31 +18,29 @@ nlohmann::json WhittedIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"light_samples", m_lightSamples}};
 }
 
-Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Rng& rng,
+Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Sampler& sampler,
                          int samples) {
   const Material& mat = scene.materials[hit.material];
   const Frame frame(hit.shadingNormal);
   const Vec3 wo = frame.toLocal(woWorld);
   Vec3 sum(0.0f);
   for (int i = 0; i < samples; ++i) {
-    const float uc = rng.uniform();
-    const Vec2 u = rng.uniform2();
-    const LightSample ls = scene.sampleLight(hit.position, uc, u);
+    const LightSample ls = scene.sampleLight(hit.position, sampler.uniform2());
     if (!(ls.pdf > 0.0f)) continue;
     const Vec3 wi = frame.toLocal(ls.wi);
     const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
     if (isBlack(f)) continue;
-    if (accel.occluded(spawnRayTo(hit.position, hit.geomNormal, ls.lightPos))) continue;
+    if (accel.occluded(spawnRayTo(hit.position, hit.positionError, hit.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal))) continue;
     sum += f * ls.radiance / ls.pdf;
   }
   return sum / static_cast<float>(samples);
 }
 
-Vec3 WhittedIntegrator::li(const Ray& ray, Rng& rng) const {
-  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Rng& r) {
-    return estimateDirectLight(m_scene, m_accel, sh, wo, r, m_lightSamples);
+Vec3 WhittedIntegrator::li(const Ray& ray, Sampler& sampler) const {
+  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px) {
+    return estimateDirectLight(m_scene, m_accel, sh, wo, px, m_lightSamples);
   };
-  return traceDeltaChains(m_scene, m_accel, ray, rng, m_maxDepth, true, direct);
+  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, true, direct);
 }
 
 }  // namespace voxcone

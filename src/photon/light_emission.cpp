@@ -83,13 +83,14 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   const Vec3& p1 = m_scene.positions[tri.y];
   const Vec3& p2 = m_scene.positions[tri.z];
   const Vec2 b = sampleUniformTriangle(uPos);
-  const Vec3 p = (1.0f - b.x - b.y) * p0 + b.x * p1 + b.y * p2;
+  Vec3 pError;
+  const Vec3 p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
   // The geometric normal from the winding is the front side (Scene::emitted).
   Vec3 n = glm::normalize(glm::cross(p1 - p0, p2 - p0));
   if (light.twoSided && uSide < 0.5f) n = -n;
   const Vec3 dir = glm::normalize(Frame(n).toWorld(sampleCosineHemisphere(uDir)));
   if (!isFinite(dir) || !isFinite(p)) return false;
-  out.ray = spawnRay(p, n, dir);
+  out.ray = spawnRay(p, pError, n, dir);
   return true;
 }
 

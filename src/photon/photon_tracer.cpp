@@ -114,7 +114,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
     }
     if (!isFinite(newPower) || !(maxComponent(newPower) > 0.0f)) return;
     power = newPower;
-    ray = spawnRay(pos, sh.geomNormal, glm::normalize(frame.toWorld(bs.wi)));
+    ray = spawnRay(pos, sh.positionError, sh.geomNormal, glm::normalize(frame.toWorld(bs.wi)));
   }
 }
 

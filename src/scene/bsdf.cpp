@@ -416,10 +416,4 @@ int bsdfDeltaLobes(const Material& m, const Vec3& wo, DeltaLobe out[2], Transpor
   }
 }
 
-bool bsdfSampleFrom(const Material& m, const Vec3& wo, Rng& rng, BsdfSample& out, TransportMode mode) {
-  const float uc = rng.uniform();
-  const Vec2 u = rng.uniform2();
-  return bsdfSample(m, wo, uc, u, out, mode) && !isBlack(out.weight);
-}
-
 }  // namespace voxcone

@@ -64,11 +64,11 @@ Sphere Scene::boundingSphere() const {
   return s;
 }
 
-SurfaceHit Scene::surfaceAt(uint32_t triangle, const Vec3& position, float b1, float b2) const {
+SurfaceHit Scene::surfaceAt(uint32_t triangle, float b1, float b2) const {
   SurfaceHit h;
   const UVec3& tri = triangles[triangle];
   const Vec3& p0 = positions[tri.x];
-  h.position = position;
+  h.position = barycentricPoint(p0, positions[tri.y], positions[tri.z], 1.0f - b1 - b2, b1, b2, h.positionError);
   h.triangle = triangle;
   h.material = triMaterial[triangle];
   h.geomNormal = glm::normalize(glm::cross(positions[tri.y] - p0, positions[tri.z] - p0));
@@ -93,15 +93,18 @@ Vec3 Scene::emitted(const SurfaceHit& hit, const Vec3& w) const {
   return Vec3(0.0f);
 }
 
-LightSample Scene::sampleLight(const Vec3& ref, float uc, const Vec2& u) const {
+LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice) const {
   LightSample ls;
   if (m_lightCdf.empty()) return ls;
-  // Choose a light by power (binary search in the CDF).
+  // Choose a light by power (binary search in the CDF), then reuse u.x within its interval.
+  const float uc = uChoice.x;
   const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_lightCdf.begin(), m_lightCdf.end(), uc) -
                                                   m_lightCdf.begin()),
                               m_lightCdf.size() - 1);
   const float pmf = m_lightPmf[idx];
   if (!(pmf > 0.0f)) return ls;
+  const float cdfBelow = idx == 0 ? 0.0f : m_lightCdf[idx - 1];
+  const Vec2 u(std::clamp((uc - cdfBelow) / pmf, 0.0f, kOneMinusEpsilon), uChoice.y);
   if (idx < m_emissiveTris.size()) {
     // Uniform point on the emissive triangle, converted to a solid-angle density at ref.
     const uint32_t t = m_emissiveTris[idx];
@@ -110,7 +113,7 @@ LightSample Scene::sampleLight(const Vec3& ref, float uc, const Vec2& u) const {
     const Vec3& p0 = positions[tri.x];
     const Vec3& p1 = positions[tri.y];
     const Vec3& p2 = positions[tri.z];
-    const Vec3 p = (1.0f - b.x - b.y) * p0 + b.x * p1 + b.y * p2;
+    const Vec3 p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, ls.lightPosError);
     const Vec3 cr = glm::cross(p1 - p0, p2 - p0);
     const float area = 0.5f * glm::length(cr);
     const Vec3 n = cr / (2.0f * area);

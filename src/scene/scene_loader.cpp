@@ -283,6 +283,12 @@ private:
     s.maxDepth = static_cast<int>(r.integer("max_depth", s.maxDepth, 1, 1024));
     s.seed = static_cast<uint64_t>(r.integer("seed", 0, 0, INT64_MAX));
     s.method = r.string("method", s.method);
+    const std::string sampler = r.string("sampler", samplerNames()[size_t(s.sampler)]);
+    try {
+      s.sampler = samplerKindFromName(sampler);
+    } catch (const SettingsError& e) {
+      r.fail(e.what(), "sampler");
+    }
     s.photons = static_cast<uint64_t>(r.integer("photons", static_cast<int64_t>(s.photons), 0, int64_t(1) << 36));
     s.causticPhotons =
         static_cast<uint64_t>(r.integer("caustic_photons", static_cast<int64_t>(s.causticPhotons), 0, int64_t(1) << 36));

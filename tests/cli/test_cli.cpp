@@ -50,7 +50,7 @@ TEST(Cli, RenderWritesExrPngAndSidecar) {
   EXPECT_EQ(j["settings"]["width"], 24);
   EXPECT_EQ(j["settings"]["height"], 16);
   EXPECT_EQ(j["seed"], 7);
-  EXPECT_EQ(j["method"], "path");
+  EXPECT_EQ(j["method"], "voxcone");  // every canonical scene renders with voxcone by default
   EXPECT_GT(j["timings"]["render_seconds"].get<double>(), 0.0);
   EXPECT_GT(j["peak_rss_bytes"].get<double>(), 0.0);
   EXPECT_EQ(j["stats"]["scene"]["triangles"], 32);

@@ -131,9 +131,10 @@ Vec3 floorRadiance(const Scene& scene, const std::string& method, const nlohmann
   auto integrator = createIntegrator(method, ctx);
   integrator->prepare(nullptr);
   DVec3 sum(0.0);
+  Sampler sampler(SamplerKind::Sobol, 7, 0);
   for (int i = 0; i < samples; ++i) {
-    Rng rng(7, uint64_t(i));
-    sum += DVec3(integrator->li(Ray{Vec3(x, 0.25f, z), Vec3(0.0f, -1.0f, 0.0f)}, rng));
+    sampler.startSample(uint32_t(i));
+    sum += DVec3(integrator->li(Ray{Vec3(x, 0.25f, z), Vec3(0.0f, -1.0f, 0.0f)}, sampler));
   }
   return Vec3(sum / double(samples));
 }

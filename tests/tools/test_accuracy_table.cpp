@@ -52,8 +52,8 @@ TEST_F(AccuracyTable, QuickRunTablesTheImagesItWrote) {
   std::ifstream f(path("out/table.json"));
   const nlohmann::json t = nlohmann::json::parse(f);
   const Image reference = readImage(ref);
-  ASSERT_EQ(t["rows"].size(), 6u);  // voxcone 1 and 4 spp, pm, path 1, 4, 16 spp
-  int paths = 0;
+  ASSERT_EQ(t["rows"].size(), 9u);  // voxcone 1 and 4 spp, pm, path 1, 4, 16 spp with each sampler
+  int paths = 0, independent = 0;
   for (const nlohmann::json& r : t["rows"]) {
     // The tabled metrics are those of the image the row wrote.
     const ImageMetrics m = compareImages(readImage(r["exr"].get<std::string>()), reference);
@@ -62,13 +62,16 @@ TEST_F(AccuracyTable, QuickRunTablesTheImagesItWrote) {
     EXPECT_GT(r["seconds"].get<double>(), 0.0);
     if (r["method"] == "path") {
       ++paths;
+      independent += r["sampler"] == "independent";
       EXPECT_FALSE(r.contains("path_seconds_same_relmse"));
     } else {
       EXPECT_GT(r["path_seconds_same_relmse"].get<double>(), 0.0);
     }
   }
-  EXPECT_EQ(paths, 3);
+  EXPECT_EQ(paths, 6);
+  EXPECT_EQ(independent, 3);
   EXPECT_GT(t["target"]["path_seconds"].get<double>(), 0.0);
+  EXPECT_GT(t["target"]["path_independent_seconds"].get<double>(), 0.0);
   EXPECT_NEAR(t["target"]["ratio"].get<double>(),
               t["target"]["voxcone_seconds"].get<double>() / t["target"]["path_seconds"].get<double>(), 1e-9);
   // The figure: pm and voxcone at the same photons, error maps on one scale (the larger 99th

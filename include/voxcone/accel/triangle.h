@@ -65,8 +65,28 @@ struct WatertightRay {
   }
 };
 
+/// A bound on the rounding error of the watertight test's distance t, from the sheared
+/// vertices (x, y, z per vertex, z already scaled by sz), the edge functions e = (u, v, w) and
+/// 1/det (the error analysis of PBRT 4th ed., section 6.8.4, eqs. 6.31-6.38). A computed t at or
+/// below it may be a hit behind the origin: the own surface of a spawned ray. It grows with the
+/// triangle's extent as seen from the origin, which is why no offset of the origin alone can
+/// prevent re-hits.
+inline float watertightDistanceError(float ax, float ay, float az, float bx, float by, float bz, float cx, float cy,
+                                     float cz, float u, float v, float w, float invDet) {
+  const float maxZ = std::max(std::fabs(az), std::max(std::fabs(bz), std::fabs(cz)));
+  const float maxX = std::max(std::fabs(ax), std::max(std::fabs(bx), std::fabs(cx)));
+  const float maxY = std::max(std::fabs(ay), std::max(std::fabs(by), std::fabs(cy)));
+  const float maxE = std::max(std::fabs(u), std::max(std::fabs(v), std::fabs(w)));
+  const float deltaZ = errorGamma(3) * maxZ;
+  const float deltaX = errorGamma(5) * (maxX + maxZ);
+  const float deltaY = errorGamma(5) * (maxY + maxZ);
+  const float deltaE = 2.0f * (errorGamma(2) * (maxX * maxY) + deltaY * maxX + deltaX * maxY);
+  return 3.0f * (errorGamma(3) * (maxE * maxZ) + deltaE * maxZ + deltaZ * maxE) * std::fabs(invDet);
+}
+
 /// Test ray (origin, wr) against triangle (p0, p1, p2) for t in (tMin, tMax). On a hit writes t
-/// and barycentrics (b1, b2) of p1 and p2 and returns true. Both sides hit.
+/// and barycentrics (b1, b2) of p1 and p2 and returns true. Both sides hit. A hit counts only
+/// where its t exceeds its own error bound (watertightDistanceError) as well as tMin.
 inline bool intersectTriangleWatertight(const Vec3& origin, const WatertightRay& wr, const Vec3& p0,
                                         const Vec3& p1, const Vec3& p2, float tMin, float tMax, float& tOut,
                                         float& b1Out, float& b2Out) {
@@ -95,7 +115,9 @@ inline bool intersectTriangleWatertight(const Vec3& origin, const WatertightRay&
   if (det < 0.0f ? (tScaled >= tMin * det || tScaled <= tMax * det) : (tScaled <= tMin * det || tScaled >= tMax * det))
     return false;
   const float invDet = 1.0f / det;
-  tOut = tScaled * invDet;
+  const float t = tScaled * invDet;
+  if (!(t > watertightDistanceError(ax, ay, az, bx, by, bz, cx, cy, cz, u, v, w, invDet))) return false;
+  tOut = t;
   b1Out = v * invDet;
   b2Out = w * invDet;
   return true;

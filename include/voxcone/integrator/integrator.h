@@ -4,7 +4,7 @@
 /// IntegratorFactory), and the tile-parallel render driver.
 
 #include "voxcone/core/progress.h"
-#include "voxcone/core/rng.h"
+#include "voxcone/core/sampler.h"
 #include "voxcone/image/image.h"
 #include "voxcone/scene/scene.h"
 
@@ -28,8 +28,8 @@ public:
   virtual std::string name() const = 0;
   /// One-time work before rendering (photon tracing, voxelization in later parts).
   virtual void prepare(Progress* progress) {}
-  /// Radiance along `ray` (a camera ray); `rng` is this pixel's random stream.
-  virtual Vec3 li(const Ray& ray, Rng& rng) const = 0;
+  /// Radiance along `ray` (a camera ray); `sampler` is this pixel's random stream.
+  virtual Vec3 li(const Ray& ray, Sampler& sampler) const = 0;
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
   /// Statistics gathered in prepare/li, as JSON.
@@ -63,8 +63,9 @@ struct RenderResult {
   uint64_t invalidSamples = 0;///< NaN/inf estimates dropped (should be 0)
 };
 
-/// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its random numbers
-/// from Rng(settings.seed, y * width + x), so the image is bit-identical at any thread count.
+/// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its samples from
+/// Sampler(settings.sampler, settings.seed, y * width + x), sample s starting at dimension 0,
+/// its first slot the jitter, so the image is bit-identical at any thread count.
 /// Box pixel filter: each sample is uniform in the pixel's square. Throws CancelledError when
 /// `progress` reports cancellation.
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,

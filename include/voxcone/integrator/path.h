@@ -7,12 +7,15 @@
 
 namespace voxcone {
 
-/// Path tracer. Options: `rr_depth` (bounces before Russian roulette starts, default 3).
+/// Path tracer. Options: `rr_depth` (bounces before Russian roulette starts, default 3),
+/// `light_sampling` ("nee", the default: next-event estimation with MIS; "none": BSDF sampling
+/// alone, emission counted where paths hit it: far noisier, but sharing no light-sampling or
+/// shadow-ray code with the default, which the tests compare it with region by region).
 class PathIntegrator final : public Integrator {
 public:
   explicit PathIntegrator(const IntegratorContext& context);
   std::string name() const override { return "path"; }
-  Vec3 li(const Ray& ray, Rng& rng) const override;
+  Vec3 li(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
 
 private:
@@ -20,6 +23,7 @@ private:
   const Accel& m_accel;
   int m_maxDepth;
   int m_rrDepth = 3;
+  bool m_nee = true;
 };
 
 }  // namespace voxcone

@@ -47,7 +47,7 @@ public:
   explicit PhotonMappingIntegrator(const IntegratorContext& context);
   std::string name() const override { return "pm"; }
   void prepare(Progress* progress) override;
-  Vec3 li(const Ray& ray, Rng& rng) const override;
+  Vec3 li(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
@@ -55,7 +55,7 @@ private:
   /// Follow `ray` as a final-gather ray: reflected radiance at its first diffuse hit from the
   /// photon maps (global map in full plus caustics), after exact delta bounces and glossy
   /// continuations; no emission is added (it is direct light or a caustic at the gather origin).
-  Vec3 gather(Ray ray, Rng& rng, int depth) const;
+  Vec3 gather(Ray ray, Sampler& sampler, int depth) const;
   /// Radiance estimate (Jensen eq. 7.6) at a diffuse surface point from `tree` over `photons`;
   /// `indirectOnly` skips photons with bounces == 0.
   Vec3 estimate(const PhotonKdTree& tree, const std::vector<Photon>& photons, bool indirectOnly,

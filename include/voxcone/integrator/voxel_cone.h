@@ -84,7 +84,7 @@ public:
   explicit VoxelConeIntegrator(const IntegratorContext& context);
   std::string name() const override { return "voxcone"; }
   void prepare(Progress* progress) override;
-  Vec3 li(const Ray& ray, Rng& rng) const override;
+  Vec3 li(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
@@ -93,15 +93,16 @@ private:
   void setField(VoxelField field);
   /// The radiance one cone gathers from surface point p (unit normal n on the side the cone
   /// leaves, unit direction d with dot(n, d) > 0 expected), half-angle atan(tanHalf).
-  Vec3 traceCone(const Vec3& p, const Vec3& n, const Vec3& d, float tanHalf) const;
-  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Rng& rng) const;
+  Vec3 traceCone(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
+  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler) const;
   /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
   /// the hit surface's normal turned towards the ray's side.
   struct AxisHit {
     float t = 0.0f;
     Vec3 position{0.0f}, side{0.0f};
   };
-  std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& n, const Vec3& d, float tMax) const;
+  std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
+                                      float tMax) const;
 
   const Scene& m_scene;
   const Accel& m_accel;

@@ -13,7 +13,7 @@ class WhittedIntegrator final : public Integrator {
 public:
   explicit WhittedIntegrator(const IntegratorContext& context);
   std::string name() const override { return "whitted"; }
-  Vec3 li(const Ray& ray, Rng& rng) const override;
+  Vec3 li(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
 
 private:
@@ -25,7 +25,7 @@ private:
 
 /// Direct light at a non-delta surface by light sampling only (no MIS): one estimate with
 /// `samples` shadow rays. wo is the unit direction towards the viewer (world space).
-Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Rng& rng,
+Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Sampler& sampler,
                          int samples);
 
 }  // namespace voxcone

@@ -12,7 +12,6 @@
 /// - Values returned by bsdfEval are f(wo, wi) WITHOUT the cosine factor.
 
 #include "voxcone/core/math.h"
-#include "voxcone/core/rng.h"
 #include "voxcone/scene/material.h"
 
 namespace voxcone {
@@ -38,10 +37,16 @@ float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi);
 bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, BsdfSample& out,
                 TransportMode mode = TransportMode::Radiance);
 
-/// bsdfSample with uc, then u, drawn from `rng` (the order every caller keeps, so images stay
-/// the same); false also when the sample carries no weight.
-bool bsdfSampleFrom(const Material& m, const Vec3& wo, Rng& rng, BsdfSample& out,
-                    TransportMode mode = TransportMode::Radiance);
+/// bsdfSample with uc, then u, drawn from `gen` (a Sampler or an Rng: anything with uniform()
+/// and uniform2(); the order every caller keeps, so images stay the same); false also when the
+/// sample carries no weight.
+template <typename Generator>
+bool bsdfSampleFrom(const Material& m, const Vec3& wo, Generator& gen, BsdfSample& out,
+                    TransportMode mode = TransportMode::Radiance) {
+  const float uc = gen.uniform();
+  const Vec2 u = gen.uniform2();
+  return bsdfSample(m, wo, uc, u, out, mode) && !isBlack(out.weight);
+}
 
 /// A deterministic lobe of a delta material (for Whitted-style splitting).
 struct DeltaLobe {

@@ -5,6 +5,7 @@
 
 #include "voxcone/core/bounds.h"
 #include "voxcone/core/ray.h"
+#include "voxcone/core/sampler.h"
 #include "voxcone/scene/camera.h"
 #include "voxcone/scene/material.h"
 
@@ -29,6 +30,7 @@ struct RenderSettings {
   int spp = 16;            ///< samples per pixel, >= 1
   int maxDepth = 16;       ///< longest path (number of segments) for path / recursion for whitted
   uint64_t seed = 0;
+  SamplerKind sampler = SamplerKind::Sobol;  ///< how pixels draw their samples (core/sampler.h)
   std::string method = "voxcone";
   uint64_t photons = 1000000;       ///< photons emitted for the global map (voxel methods)
   uint64_t causticPhotons = 200000; ///< photons emitted for the caustic map, when caustics are possible
@@ -49,6 +51,7 @@ struct LightSample {
   Vec3 radiance{0.0f};   ///< Le (area) or I/r^2 (point) arriving along -wi, before visibility
   Vec3 wi{0.0f};         ///< unit direction from the shading point to the light
   Vec3 lightPos{0.0f};   ///< sampled point on the light
+  Vec3 lightPosError{0.0f};///< bound on lightPos's rounding error per axis (zero for point lights)
   Vec3 lightNormal{0.0f};///< geometric normal there (zero for point lights)
   float distance = 0.0f;
   float pdf = 0.0f;      ///< solid-angle pdf (including the light choice); 0 = failed
@@ -57,7 +60,8 @@ struct LightSample {
 
 /// The surface at a ray hit.
 struct SurfaceHit {
-  Vec3 position{0.0f};
+  Vec3 position{0.0f};     ///< from the hit's barycentrics (not origin + t dir)
+  Vec3 positionError{0.0f};///< bound on position's rounding error per axis (barycentricPoint)
   Vec3 geomNormal{0.0f};   ///< unit, from the winding: normalize(cross(v1-v0, v2-v0))
   Vec3 shadingNormal{0.0f};///< unit; the geometric one for flat shading
   uint32_t triangle = 0;
@@ -88,8 +92,10 @@ public:
   /// Bounding sphere of the scene bounds.
   Sphere boundingSphere() const;
 
-  /// Surface data at barycentrics (b1, b2) of `triangle` hit at `position`.
-  SurfaceHit surfaceAt(uint32_t triangle, const Vec3& position, float b1, float b2) const;
+  /// Surface data at barycentrics (b1, b2) of `triangle`: the point itself is interpolated
+  /// from the vertices, with its error bound, because origin + t dir carries the error of t
+  /// times the ray's length (the bias of every shadow ray from surfaces near coordinate 0).
+  SurfaceHit surfaceAt(uint32_t triangle, float b1, float b2) const;
 
   /// Emitted radiance leaving an emissive surface towards direction `w` (unit, pointing away).
   Vec3 emitted(const SurfaceHit& hit, const Vec3& w) const;
@@ -98,8 +104,12 @@ public:
   // proportion to its power (luminance of emitted flux).
   size_t lightCount() const { return m_lightCdf.size(); }
   bool hasLights() const { return !m_lightCdf.empty(); }
-  /// Sample a light towards `ref` with uc (light choice) and u (point on it).
-  LightSample sampleLight(const Vec3& ref, float uc, const Vec2& u) const;
+  /// Sample a light towards `ref` with one 2D sample u: u.x chooses the light, then, rescaled to
+  /// [0,1) within the chosen light's share of the CDF, picks the point with u.y. Choice and
+  /// point from one stratified 2D sample keep the point set on each light stratified (two
+  /// separate samples would pick each triangle's points at random from a net), which matters
+  /// for quads, two triangles of equal power.
+  LightSample sampleLight(const Vec3& ref, const Vec2& u) const;
   /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
   float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
   /// Total emitted power (W, luminance), for photon emission in part 2.

@@ -1,0 +1,115 @@
+#pragma once
+/// \file sampler.h
+/// The per-pixel sample source of every integrator: pixel jitter, light samples and BSDF
+/// samples are drawn from it dimension by dimension.
+///
+/// `sobol` (the default): each call to uniform() or uniform2() is one dimension slot; a slot is
+/// the (0,2)-sequence (Sobol's first two dimensions) under its own random Owen scramble, read
+/// at the pixel sample's index shuffled by another Owen scramble. This is the "shuffled,
+/// scrambled Sobol" padding of Burley 2020, "Practical Hash-based Owen Scrambling", JCGT 9(4),
+/// sec. 4-5 (nested uniform scrambling by a Laine-Karras style hash), as pbrt-v4's
+/// PaddedSobolSampler: within a pixel, every 2D projection the integrators use (jitter, a light
+/// sample, a BSDF sample) is a scrambled (0,m,2)-net for power-of-two sample counts, so its
+/// error falls faster than 1/sqrt(spp) where the integrand is smooth in those dimensions.
+/// `independent`: one PCG32 stream per pixel (the sampler before this one).
+///
+/// Both depend on (seed, pixel index, sample index, dimension) only, never on thread or tile
+/// order, so images are bit-identical at any thread count.
+
+#include "voxcone/core/rng.h"
+
+#include <string>
+#include <vector>
+
+namespace voxcone {
+
+/// How a Sampler draws.
+enum class SamplerKind { Sobol, Independent };
+
+/// Names of the kinds ("sobol", "independent"), in enum order.
+const std::vector<std::string>& samplerNames();
+/// The kind named `name`; throws SettingsError for any other name.
+SamplerKind samplerKindFromName(const std::string& name);
+
+/// Reverse the 32 bits of v.
+inline uint32_t reverseBits32(uint32_t v) {
+  v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
+  v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
+  v = ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
+  v = ((v >> 8) & 0x00ff00ffu) | ((v & 0x00ff00ffu) << 8);
+  return (v >> 16) | (v << 16);
+}
+
+/// Nested uniform (Owen) scrambling of a 32-bit fixed-point value in [0,1) keyed by `seed`
+/// (Burley 2020, listing 3): a bijection on 32-bit values in which each bit is flipped by a
+/// hash of the bits above it, which keeps every elementary interval of a net mapped onto one.
+inline uint32_t owenScramble(uint32_t v, uint32_t seed) {
+  // Laine-Karras style permutation on the reversed bits: each step only carries information
+  // from lower to higher bits (an even multiplier), i.e. from the value's leading bits down.
+  v = reverseBits32(v);
+  v += seed;
+  v ^= v * 0x6c50b47cu;
+  v ^= v * 0xb82f1e52u;
+  v ^= v * 0xc7afe638u;
+  v ^= v * 0x8d22f6e6u;
+  return reverseBits32(v);
+}
+
+/// The first Sobol dimension (the base-2 radical inverse) at `index`, as 32-bit fixed point.
+inline uint32_t sobolDim0(uint32_t index) { return reverseBits32(index); }
+
+/// The second Sobol dimension at `index` (primitive polynomial x + 1: direction numbers
+/// v_0 = 2^31, v_k = v_{k-1} xor (v_{k-1} >> 1), the upper-triangular Pascal matrix mod 2).
+inline uint32_t sobolDim1(uint32_t index) {
+  uint32_t result = 0, v = 0x80000000u;
+  for (; index; index >>= 1, v ^= v >> 1)
+    if (index & 1u) result ^= v;
+  return result;
+}
+
+/// Samples of one pixel. startSample(i) begins sample i at dimension 0; each uniform() or
+/// uniform2() then takes the next dimension slot.
+class Sampler {
+public:
+  /// The sampler of pixel `pixel` (y * width + x) for render seed `seed`.
+  Sampler(SamplerKind kind, uint64_t seed, uint64_t pixel)
+      : m_kind(kind), m_rng(seed, pixel), m_pixelKey(mixBits(mixBits(seed) ^ (pixel + 0x632be59bd9b4e019ULL))) {}
+
+  SamplerKind kind() const { return m_kind; }
+
+  /// Begin the pixel's sample `index` (0, 1, ... spp-1), at dimension 0.
+  void startSample(uint32_t index) {
+    m_index = index;
+    m_dimension = 0;
+  }
+
+  /// Uniform in [0, 1).
+  float uniform() {
+    if (m_kind == SamplerKind::Independent) return m_rng.uniform();
+    const uint64_t key = slotKey();
+    return toUnit(owenScramble(sobolDim0(owenScramble(m_index, uint32_t(key))), uint32_t(key >> 32)));
+  }
+
+  /// Uniform in [0, 1)^2, the two coordinates of one stratified dimension slot.
+  Vec2 uniform2() {
+    if (m_kind == SamplerKind::Independent) return m_rng.uniform2();
+    const uint64_t key = slotKey();
+    const uint32_t shuffled = owenScramble(m_index, uint32_t(key));
+    const uint32_t x = owenScramble(sobolDim0(shuffled), uint32_t(key >> 32));
+    const uint32_t y = owenScramble(sobolDim1(shuffled), uint32_t(mixBits(key) >> 32));
+    return Vec2(toUnit(x), toUnit(y));
+  }
+
+private:
+  /// The next slot's scrambling keys, from the pixel and the dimension only.
+  uint64_t slotKey() { return mixBits(m_pixelKey + 0x9e3779b97f4a7c15ULL * (uint64_t(m_dimension++) + 1)); }
+  static float toUnit(uint32_t v) { return std::min(kOneMinusEpsilon, float(v) * 0x1p-32f); }
+
+  SamplerKind m_kind;
+  Rng m_rng;
+  uint64_t m_pixelKey;
+  uint32_t m_index = 0;
+  uint32_t m_dimension = 0;
+};
+
+}  // namespace voxcone
