@@ -31,41 +31,70 @@ const std::vector<std::string>& samplerNames();
 /// The kind named `name`; throws SettingsError for any other name.
 SamplerKind samplerKindFromName(const std::string& name);
 
-/// Reverse the 32 bits of v.
+/// Reverse the 32 bits of v (a byte swap, then bits within bytes).
 inline uint32_t reverseBits32(uint32_t v) {
+  v = __builtin_bswap32(v);
   v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
   v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
-  v = ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
-  v = ((v >> 8) & 0x00ff00ffu) | ((v & 0x00ff00ffu) << 8);
-  return (v >> 16) | (v << 16);
+  return ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
+}
+
+/// The Laine-Karras style permutation of Burley 2020 (listing 2) on bit-reversed values: each
+/// step only carries information from lower to higher bits (an addition, xors with products by
+/// even constants), so output bit k depends on input bits 0..k only.
+inline uint32_t laineKarrasPermutation(uint32_t v, uint32_t seed) {
+  v += seed;
+  v ^= v * 0x6c50b47cu;
+  v ^= v * 0xb82f1e52u;
+  v ^= v * 0xc7afe638u;
+  v ^= v * 0x8d22f6e6u;
+  return v;
 }
 
 /// Nested uniform (Owen) scrambling of a 32-bit fixed-point value in [0,1) keyed by `seed`
 /// (Burley 2020, listing 3): a bijection on 32-bit values in which each bit is flipped by a
 /// hash of the bits above it, which keeps every elementary interval of a net mapped onto one.
 inline uint32_t owenScramble(uint32_t v, uint32_t seed) {
-  // Laine-Karras style permutation on the reversed bits: each step only carries information
-  // from lower to higher bits (an even multiplier), i.e. from the value's leading bits down.
-  v = reverseBits32(v);
-  v += seed;
-  v ^= v * 0x6c50b47cu;
-  v ^= v * 0xb82f1e52u;
-  v ^= v * 0xc7afe638u;
-  v ^= v * 0x8d22f6e6u;
-  return reverseBits32(v);
+  return reverseBits32(laineKarrasPermutation(reverseBits32(v), seed));
 }
 
 /// The first Sobol dimension (the base-2 radical inverse) at `index`, as 32-bit fixed point.
 inline uint32_t sobolDim0(uint32_t index) { return reverseBits32(index); }
 
-/// The second Sobol dimension at `index` (primitive polynomial x + 1: direction numbers
-/// v_0 = 2^31, v_k = v_{k-1} xor (v_{k-1} >> 1), the upper-triangular Pascal matrix mod 2).
-inline uint32_t sobolDim1(uint32_t index) {
-  uint32_t result = 0, v = 0x80000000u;
-  for (; index; index >>= 1, v ^= v >> 1)
-    if (index & 1u) result ^= v;
-  return result;
+namespace detail {
+/// Sobol's second dimension, bit-reversed, by bytes: the generator matrix is linear over GF(2),
+/// so the value at `index` is the xor of the four bytes' contributions. Direction numbers (not
+/// reversed) v_0 = 2^31, v_k = v_{k-1} xor (v_{k-1} >> 1): the upper-triangular Pascal matrix
+/// mod 2 of primitive polynomial x + 1.
+struct SobolDim1Table {
+  uint32_t byByte[4][256];
+  SobolDim1Table() {
+    uint32_t reversedDirection[32];
+    uint32_t v = 0x80000000u;
+    for (int k = 0; k < 32; ++k, v ^= v >> 1) reversedDirection[k] = reverseBits32(v);
+    for (int b = 0; b < 4; ++b)
+      for (uint32_t byte = 0; byte < 256; ++byte) {
+        uint32_t x = 0;
+        for (int bit = 0; bit < 8; ++bit)
+          if (byte & (1u << bit)) x ^= reversedDirection[8 * b + bit];
+        byByte[b][byte] = x;
+      }
+  }
+};
+inline const SobolDim1Table& sobolDim1Table() {
+  static const SobolDim1Table table;
+  return table;
 }
+}  // namespace detail
+
+/// Sobol's second dimension at `index`, bit-reversed (the form the scrambling works on).
+inline uint32_t sobolDim1Reversed(uint32_t index) {
+  const auto& t = detail::sobolDim1Table().byByte;
+  return t[0][index & 0xffu] ^ t[1][(index >> 8) & 0xffu] ^ t[2][(index >> 16) & 0xffu] ^ t[3][index >> 24];
+}
+
+/// Sobol's second dimension at `index`, as 32-bit fixed point.
+inline uint32_t sobolDim1(uint32_t index) { return reverseBits32(sobolDim1Reversed(index)); }
 
 /// Samples of one pixel. startSample(i) begins sample i at dimension 0; each uniform() or
 /// uniform2() then takes the next dimension slot.
@@ -79,7 +108,7 @@ public:
 
   /// Begin the pixel's sample `index` (0, 1, ... spp-1), at dimension 0.
   void startSample(uint32_t index) {
-    m_index = index;
+    m_reversedIndex = reverseBits32(index);
     m_dimension = 0;
   }
 
@@ -87,28 +116,35 @@ public:
   float uniform() {
     if (m_kind == SamplerKind::Independent) return m_rng.uniform();
     const uint64_t key = slotKey();
-    return toUnit(owenScramble(sobolDim0(owenScramble(m_index, uint32_t(key))), uint32_t(key >> 32)));
+    // owenScramble(sobolDim0(shuffled)), whose reversals cancel: the shuffled index is the
+    // reversed radical inverse already.
+    return toUnit(reverseBits32(laineKarrasPermutation(shuffledIndex(key), uint32_t(key >> 32))));
   }
 
   /// Uniform in [0, 1)^2, the two coordinates of one stratified dimension slot.
   Vec2 uniform2() {
     if (m_kind == SamplerKind::Independent) return m_rng.uniform2();
     const uint64_t key = slotKey();
-    const uint32_t shuffled = owenScramble(m_index, uint32_t(key));
-    const uint32_t x = owenScramble(sobolDim0(shuffled), uint32_t(key >> 32));
-    const uint32_t y = owenScramble(sobolDim1(shuffled), uint32_t(mixBits(key) >> 32));
+    const uint32_t shuffled = shuffledIndex(key);
+    const uint32_t x = reverseBits32(laineKarrasPermutation(shuffled, uint32_t(key >> 32)));
+    const uint32_t y = reverseBits32(laineKarrasPermutation(sobolDim1Reversed(shuffled), uint32_t(mixBits(key) >> 32)));
     return Vec2(toUnit(x), toUnit(y));
   }
 
 private:
   /// The next slot's scrambling keys, from the pixel and the dimension only.
   uint64_t slotKey() { return mixBits(m_pixelKey + 0x9e3779b97f4a7c15ULL * (uint64_t(m_dimension++) + 1)); }
+  /// The sample index under this slot's nested scramble (Burley's shuffle): owenScramble(index,
+  /// key).
+  uint32_t shuffledIndex(uint64_t key) const {
+    return reverseBits32(laineKarrasPermutation(m_reversedIndex, uint32_t(key)));
+  }
   static float toUnit(uint32_t v) { return std::min(kOneMinusEpsilon, float(v) * 0x1p-32f); }
 
   SamplerKind m_kind;
   Rng m_rng;
   uint64_t m_pixelKey;
-  uint32_t m_index = 0;
+  uint32_t m_reversedIndex = 0;  ///< the sample index bit-reversed, once per sample
   uint32_t m_dimension = 0;
 };
 
