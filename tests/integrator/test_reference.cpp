@@ -152,8 +152,8 @@ class DirectLightOnPlanes : public ::testing::TestWithParam<DirectCase> {};
 TEST_P(DirectLightOnPlanes, MatchesTheClosedFormAtEveryPointAxisAndOffset) {
   // Area light: within 0.1% at every point (1024 stratified samples; measured at most 2.5e-4,
   // where independent samples leave about 0.5% standard error). Point light: one
-  // deterministic shadow ray, so within float rounding (1e-4). A self-hit of the shadow ray shows as black, one of path's bounce
-  // ray as a missing MIS share.
+  // deterministic shadow ray, so within float rounding (1e-4). A self-hit of the shadow ray
+  // shows as black, one of path's bounce ray as a missing MIS share.
   const DirectCase c = GetParam();
   const int samples = c.pointLight ? 4 : 1024;
   const double bound = c.pointLight ? 1e-4 : 1e-3;
@@ -172,31 +172,31 @@ TEST_P(DirectLightOnPlanes, MatchesTheClosedFormAtEveryPointAxisAndOffset) {
       for (double u : {-250.0, -100.0, 0.0, 0.001, 120.0, 250.0})
         for (double v : {-250.0, -60.0, 0.0, 180.0, 250.0})
           for (const DVec3 eyeOffset : {DVec3(40.0, -25.0, 150.0), DVec3(900.0, -700.0, 350.0)}) {
-          const DVec3 target = f.world(u, v, 0.0);
-          // Seen from below the light: nearly overhead, and from afar at a slant (a hit point
-          // taken as origin + t dir carries t times the ray's rounding).
-          const DVec3 eye = f.world(u + eyeOffset.x, v + eyeOffset.y, eyeOffset.z);
-          Ray ray;
-          ray.origin = Vec3(eye);
-          ray.dir = Vec3(glm::normalize(target - eye));
-          SurfaceHit sh;
-          ASSERT_TRUE(intersectSurface(scene, accel, ray, sh));
-          const DVec3 p(sh.position);
-          double exact;
-          if (c.pointLight) {
-            const DVec3 d = f.world(0, 0, kLightHeight) - p;
-            exact = kAlbedo / kPi * kPointIntensity * glm::dot(f.normal(), glm::normalize(d)) / glm::dot(d, d);
-          } else {
-            exact = kAlbedo / kPi * kLightRadiance * lambertPolygonIrradiance(p, f.normal(), f.light());
+            const DVec3 target = f.world(u, v, 0.0);
+            // Seen from below the light: nearly overhead, and from afar at a slant (a hit point
+            // taken as origin + t dir carries t times the ray's rounding).
+            const DVec3 eye = f.world(u + eyeOffset.x, v + eyeOffset.y, eyeOffset.z);
+            Ray ray;
+            ray.origin = Vec3(eye);
+            ray.dir = Vec3(glm::normalize(target - eye));
+            SurfaceHit sh;
+            ASSERT_TRUE(intersectSurface(scene, accel, ray, sh));
+            const DVec3 p(sh.position);
+            double exact;
+            if (c.pointLight) {
+              const DVec3 d = f.world(0, 0, kLightHeight) - p;
+              exact = kAlbedo / kPi * kPointIntensity * glm::dot(f.normal(), glm::normalize(d)) / glm::dot(d, d);
+            } else {
+              exact = kAlbedo / kPi * kLightRadiance * lambertPolygonIrradiance(p, f.normal(), f.light());
+            }
+            const Estimate e = estimateAlong(*integrator, ray, samples, uint64_t(points));
+            const double rel = std::fabs(e.mean / exact - 1.0);
+            worst = std::max(worst, rel);
+            EXPECT_LT(rel, bound) << c.method << " axis " << axis << " offset " << offset << " at (" << u << ", "
+                                  << v << "): " << e.mean << " vs exact " << exact << " (std error " << e.stdError
+                                  << ")";
+            ++points;
           }
-          const Estimate e = estimateAlong(*integrator, ray, samples, uint64_t(points));
-          const double rel = std::fabs(e.mean / exact - 1.0);
-          worst = std::max(worst, rel);
-          EXPECT_LT(rel, bound) << c.method << " axis " << axis << " offset " << offset << " at (" << u << ", "
-                                << v << "): " << e.mean << " vs exact " << exact << " (std error " << e.stdError
-                                << ")";
-          ++points;
-        }
     }
   std::printf("%s, %s light: %d points, largest relative error %.2e\n", c.method.c_str(),
               c.pointLight ? "point" : "area", points, worst);
@@ -362,8 +362,9 @@ void expectRegionsAgree(const std::vector<RegionDiff>& diffs, const std::string&
     std::printf("%-22s %-14s %5d px  mean %.5f  diff %+.2f%%  (std error %.2f%%)\n", what.c_str(), r.name.c_str(),
                 r.pixels, r.meanA, 100.0 * r.diff / r.meanA, 100.0 * r.stdError / r.meanA);
     EXPECT_LE(std::fabs(r.diff), 4.5 * r.stdError) << what << ": region " << r.name;
-    if (room.count(r.name))
+    if (room.count(r.name)) {
       EXPECT_LT(4.5 * r.stdError, detectable * r.meanA) << what << ": region " << r.name << " too noisy to test";
+    }
   }
   EXPECT_GE(tested, 8) << what;
 }

@@ -28,7 +28,8 @@ public:
   virtual std::string name() const = 0;
   /// One-time work before rendering (photon tracing, voxelization in later parts).
   virtual void prepare(Progress* progress) {}
-  /// Radiance along `ray` (a camera ray); `sampler` is this pixel's random stream.
+  /// Radiance along `ray` (a camera ray); `sampler` is this pixel's sample source, at the
+  /// current sample (core/sampler.h).
   virtual Vec3 li(const Ray& ray, Sampler& sampler) const = 0;
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
