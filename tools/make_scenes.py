@@ -58,7 +58,7 @@ def base(materials):
     mats.update(materials)
     return {
         "camera": {"position": [278, 273, -800], "target": [278, 273, 0], "up": [0, 1, 0], "fov_y_deg": 39.3077},
-        "render": {"width": 256, "height": 256, "spp": 64, "max_depth": 16, "seed": 0, "method": "voxcone"},
+        "render": {"width": 256, "height": 256, "spp": 16, "max_depth": 16, "seed": 0, "method": "voxcone"},
         "materials": mats,
         "shapes": [{"type": "quad", "name": n, "material": m, "vertices": v} for n, m, v in ROOM],
     }

@@ -58,8 +58,11 @@ void runVoxelize(const VoxelizeOptions& o) {
       o.causticLevel >= 0 ? o.causticLevel : (specular ? std::max(o.level, std::min(o.level + 1, 10)) : 0);
 
   PhotonSettings ps;
-  ps.photons = o.photons >= 0 ? uint64_t(o.photons) : scene.render.photons;
-  ps.causticPhotons = causticLevel > 0 ? (o.causticPhotons >= 0 ? uint64_t(o.causticPhotons) : scene.render.causticPhotons) : 0;
+  uint64_t photons, causticPhotons;
+  defaultPhotonCounts(scene.render.photons, scene.render.causticPhotons, kVoxconeDefaultPhotons, photons,
+                      causticPhotons);
+  ps.photons = o.photons >= 0 ? uint64_t(o.photons) : photons;
+  ps.causticPhotons = causticLevel > 0 ? (o.causticPhotons >= 0 ? uint64_t(o.causticPhotons) : causticPhotons) : 0;
   ps.seed = o.seed;
   const PhotonMaps maps = tracePhotons(scene, accel, ps, &progress);
 

@@ -59,7 +59,9 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
   if (byError == byTime) throw SettingsError("give one of --target-error and --time-budget, with a positive value");
   if (!req.fixedOptions.is_object()) throw SettingsError("voxcone options must be a JSON object");
   Timer pilotTimer;
-  const nlohmann::json& fixed = req.fixedOptions;
+  // The pilot's model (render time and pixel noise per sample) is of cones on every sample.
+  nlohmann::json fixed = req.fixedOptions;
+  if (!fixed.contains("gathers")) fixed["gathers"] = 0;
   for (const char* k : {"level", "photons", "cones"})
     if (fixed.contains(k) && !fixed[k].is_number_integer())
       throw SettingsError(std::string("voxcone.") + k + ": expected an integer");
@@ -69,7 +71,9 @@ AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel,
   ps.width = std::max(16, settings.width / 4);
   ps.height = std::max(16, settings.height / 4);
   ps.spp = kPilotSpp;
-  const double causticRatio = settings.photons > 0 ? double(settings.causticPhotons) / double(settings.photons) : 0.2;
+  const double causticRatio = settings.photons > 0 && settings.causticPhotons > 0
+                                  ? double(settings.causticPhotons) / double(settings.photons)
+                                  : 0.2;
   // The user's other options (kernel, exact_segment, ...) apply to every pilot.
   nlohmann::json base = fixed;
   for (const char* k : {"level", "photons", "caustic_photons", "cones", "seed"}) base.erase(k);

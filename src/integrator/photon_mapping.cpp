@@ -31,10 +31,13 @@ PhotonMappingIntegrator::PhotonMappingIntegrator(const IntegratorContext& c)
   const double defaultRadius = sceneRadius > 0.0f ? 0.05 * sceneRadius : 1.0;  // empty scene: any radius finds nothing
   m_maxRadius = static_cast<float>(r.number("max_radius", defaultRadius, 1e-30, 1e30));
   constexpr int kMaxInt = std::numeric_limits<int>::max();
-  m_photonSettings.photons = static_cast<uint64_t>(
-      r.integer("photons", static_cast<int>(std::min<uint64_t>(c.settings.photons, kMaxInt)), 0, kMaxInt));
-  m_photonSettings.causticPhotons = static_cast<uint64_t>(r.integer(
-      "caustic_photons", static_cast<int>(std::min<uint64_t>(c.settings.causticPhotons, kMaxInt)), 0, kMaxInt));
+  uint64_t photons, causticPhotons;
+  defaultPhotonCounts(c.settings.photons, c.settings.causticPhotons, kPhotonMappingDefaultPhotons, photons,
+                      causticPhotons);
+  m_photonSettings.photons =
+      static_cast<uint64_t>(r.integer("photons", static_cast<int>(std::min<uint64_t>(photons, kMaxInt)), 0, kMaxInt));
+  m_photonSettings.causticPhotons = static_cast<uint64_t>(
+      r.integer("caustic_photons", static_cast<int>(std::min<uint64_t>(causticPhotons, kMaxInt)), 0, kMaxInt));
   m_k = r.integer("k", 100, 1, 10000);
   m_finalGather = r.integer("final_gather", 0, 0, 65536);
   m_photonSettings.seed = c.settings.seed + static_cast<uint64_t>(r.integer("seed", 0, 0, kMaxInt));

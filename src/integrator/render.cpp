@@ -31,7 +31,8 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     for (int y = y0; y < std::min(y0 + kTile, h); ++y)
       for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
         Sampler sampler(settings.sampler, settings.seed,
-                        static_cast<uint64_t>(y) * static_cast<uint64_t>(w) + static_cast<uint64_t>(x));
+                        static_cast<uint64_t>(y) * static_cast<uint64_t>(w) + static_cast<uint64_t>(x),
+                        static_cast<uint32_t>(settings.spp));
         // Sum in double so the mean does not depend on float rounding of a long sum.
         DVec3 sum(0.0);
         for (int s = 0; s < settings.spp; ++s) {

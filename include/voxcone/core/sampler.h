@@ -100,14 +100,22 @@ inline uint32_t sobolDim1(uint32_t index) { return reverseBits32(sobolDim1Revers
 /// uniform2() then takes the next dimension slot.
 class Sampler {
 public:
-  /// The sampler of pixel `pixel` (y * width + x) for render seed `seed`.
-  Sampler(SamplerKind kind, uint64_t seed, uint64_t pixel)
-      : m_kind(kind), m_rng(seed, pixel), m_pixelKey(mixBits(mixBits(seed) ^ (pixel + 0x632be59bd9b4e019ULL))) {}
+  /// The sampler of pixel `pixel` (y * width + x) for render seed `seed`, which will take
+  /// `samplesPerPixel` samples (integrators that spend some work on only a few of a pixel's
+  /// samples weight it by this count).
+  Sampler(SamplerKind kind, uint64_t seed, uint64_t pixel, uint32_t samplesPerPixel = 1)
+      : m_kind(kind), m_rng(seed, pixel), m_pixelKey(mixBits(mixBits(seed) ^ (pixel + 0x632be59bd9b4e019ULL))),
+        m_samplesPerPixel(samplesPerPixel) {}
 
   SamplerKind kind() const { return m_kind; }
+  /// The index of the current sample (startSample's argument).
+  uint32_t sampleIndex() const { return m_index; }
+  /// The number of samples the pixel takes.
+  uint32_t samplesPerPixel() const { return m_samplesPerPixel; }
 
   /// Begin the pixel's sample `index` (0, 1, ... spp-1), at dimension 0.
   void startSample(uint32_t index) {
+    m_index = index;
     m_reversedIndex = reverseBits32(index);
     m_dimension = 0;
   }
@@ -144,7 +152,9 @@ private:
   SamplerKind m_kind;
   Rng m_rng;
   uint64_t m_pixelKey;
-  uint32_t m_reversedIndex = 0;  ///< the sample index bit-reversed, once per sample
+  uint32_t m_samplesPerPixel = 1;
+  uint32_t m_index = 0;
+  uint32_t m_reversedIndex = 0;  ///< m_index bit-reversed, once per sample
   uint32_t m_dimension = 0;
 };
 

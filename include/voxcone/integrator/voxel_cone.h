@@ -48,8 +48,9 @@
 /// left comes from coarse voxels that hold both rooms' walls: measured in the tests.
 ///
 /// Options (unknown keys are SettingsErrors):
-///  - `level` [1, 12] (default 7), `coarsest_level` [0, level] (default 1);
-///  - `photons`, `caustic_photons` (default RenderSettings.photons / causticPhotons),
+///  - `level` [1, 12] (default 6), `coarsest_level` [0, level] (default 1);
+///  - `photons`, `caustic_photons` (default the scene's render.photons / caustic_photons, else
+///    kVoxconeDefaultPhotons and a fifth of it),
 ///    `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
 ///    `kernel_sigma` (photon footprint, finest voxels, default 0.75), `seed` (added to the
 ///    render seed for the photon pass);
@@ -57,6 +58,12 @@
 ///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
 ///    default: the scene's bounding-sphere diameter);
 ///  - `light_samples` (shadow rays per shading point, default 1);
+///  - `gathers`: how many of a pixel's samples gather indirect light by cones (default 4; 0:
+///    every one).
+///    With spp > gathers, only samples 0 .. gathers-1 gather, weighted spp / gathers: the pixel's
+///    expected value is unchanged, direct light, edges and specular chains keep every sample,
+///    and the cones (98% of the time) cost gathers instead of spp. The stratified sampler gives
+///    those samples' cone rotations and positions a stratified subset of the pixel;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
 ///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
 ///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
@@ -114,6 +121,7 @@ private:
   float m_coneStep = 1.0f;
   float m_maxDistance = 0.0f;
   int m_lightSamples = 1;
+  int m_gathers = 0;            ///< pixel samples that gather indirect light (0: all)
   float m_exactSegment = 0.0f;  ///< finest voxels
   bool m_hitGather = false;     ///< gather = "hit": one exact ray per cone, field filtered at the hit
   enum class View { Full, Direct, Indirect, Caustic, Field } m_view = View::Full;

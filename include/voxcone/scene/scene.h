@@ -32,8 +32,12 @@ struct RenderSettings {
   uint64_t seed = 0;
   SamplerKind sampler = SamplerKind::Sobol;  ///< how pixels draw their samples (core/sampler.h)
   std::string method = "voxcone";
-  uint64_t photons = 1000000;       ///< photons emitted for the global map (voxel methods)
-  uint64_t causticPhotons = 200000; ///< photons emitted for the caustic map, when caustics are possible
+  /// Photons emitted for the global map; 0: the method's own default (voxcone
+  /// kVoxconeDefaultPhotons, pm kPhotonMappingDefaultPhotons).
+  uint64_t photons = 0;
+  /// Photons emitted for the caustic map, when caustics are possible; 0: a fifth of the global
+  /// map's.
+  uint64_t causticPhotons = 0;
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };
