@@ -194,8 +194,7 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& pError, const Vec
     // would not, the lookup takes the finest whole level that does.
     const float vClear = t * cosPhi / kClearance;
     float v = std::min(t * tanHalf, vClear);
-    if (v > m_v0 && m_v0 * std::exp2(std::ceil(std::log2(v / m_v0))) > vClear)
-      v = m_v0 * std::exp2(std::floor(std::log2(vClear / m_v0)));
+    if (v > m_v0 && m_v0 * ceilPow2(v / m_v0) > vClear) v = m_v0 * floorPow2(vClear / m_v0);
     v = std::clamp(v, m_v0, vMax);
     if (hitSurface && t + kClearance * v > tEnd) break;
     const Vec3 x = p + d * t;

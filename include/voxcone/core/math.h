@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 namespace voxcone {
@@ -41,6 +42,22 @@ inline bool isFinite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite
 template <typename T> inline T sqr(T x) { return x * x; }
 
 inline float safeSqrt(float x) { return std::sqrt(std::max(0.0f, x)); }
+
+/// The largest power of two <= x, for a normal float x > 0: x with its mantissa bits cleared
+/// (exp2(floor(log2(x))) without the two library calls).
+inline float floorPow2(float x) {
+  uint32_t bits;
+  std::memcpy(&bits, &x, sizeof(float));
+  bits &= 0xff800000u;
+  std::memcpy(&x, &bits, sizeof(float));
+  return x;
+}
+
+/// The smallest power of two >= x, for a normal float x > 0 (exp2(ceil(log2(x)))).
+inline float ceilPow2(float x) {
+  const float f = floorPow2(x);
+  return f == x ? x : 2.0f * f;
+}
 
 /// Orthonormal frame around a unit normal (Duff et al. 2017, "Building an Orthonormal Basis,
 /// Revisited", JCGT 6(1)). Local z is the normal.
