@@ -129,6 +129,9 @@ struct Level {
   std::unique_ptr<IndexTree> tree;      ///< brick coordinate -> brick index
   std::vector<uint64_t> brickMask;      ///< occupied voxels of the brick
   std::vector<uint32_t> brickBase;      ///< index of the brick's first voxel
+  /// Levels up to kDenseBrickLevel: brick coordinate -> brick index (or -1) in a flat array of
+  /// (resolution / 4)^3 entries (1 MB at level 8), so lookups need no tree probe; empty above.
+  std::vector<int32_t> denseBricks;
   std::vector<Half> coverage;
   std::vector<uint16_t> normal;
   std::vector<uint8_t> albedo;          ///< 3 per voxel
@@ -148,12 +151,24 @@ struct Level {
   /// Index of voxel (i, j, k) in the attribute arrays, or -1 when inactive or outside.
   int64_t find(int64_t i, int64_t j, int64_t k, IndexAccessor& acc) const {
     if (i < 0 || j < 0 || k < 0 || i >= resolution || j >= resolution || k >= resolution) return -1;
-    uint32_t b = 0;
-    if (!acc.probeValue(openvdb::Coord(int32_t(i >> 2), int32_t(j >> 2), int32_t(k >> 2)), b)) return -1;
+    const int64_t brick = brickAt(int32_t(i >> 2), int32_t(j >> 2), int32_t(k >> 2), acc);
+    if (brick < 0) return -1;
+    const uint32_t b = uint32_t(brick);
     const uint32_t bit = voxel::brickBit(uint32_t(i), uint32_t(j), uint32_t(k));
     const uint64_t mask = brickMask[b];
     if (!((mask >> bit) & 1u)) return -1;
     return int64_t(brickBase[b]) + __builtin_popcountll(mask & ((uint64_t(1) << bit) - 1));
+  }
+
+  /// Index of brick (bi, bj, bk) (inside the level), or -1 when it has no voxel: from the flat
+  /// table where there is one, else a probe of the tree.
+  int64_t brickAt(int32_t bi, int32_t bj, int32_t bk, IndexAccessor& acc) const {
+    if (!denseBricks.empty()) {
+      const size_t side = resolution >> 2;
+      return denseBricks[(size_t(bk) * side + size_t(bj)) * side + size_t(bi)];
+    }
+    uint32_t b = 0;
+    return acc.probeValue(openvdb::Coord(bi, bj, bk), b) ? int64_t(b) : -1;
   }
 
   float opacity(size_t v) const { return std::min(1.0f, float(coverage[v])); }
@@ -201,9 +216,14 @@ struct Level {
   }
 
   uint64_t topologyBytes() const {
-    return (tree ? tree->memUsage() : 0) + brickMask.capacity() * sizeof(uint64_t) + brickBase.capacity() * sizeof(uint32_t);
+    return (tree ? tree->memUsage() : 0) + brickMask.capacity() * sizeof(uint64_t) +
+           brickBase.capacity() * sizeof(uint32_t) + denseBricks.capacity() * sizeof(int32_t);
   }
 };
+
+/// Levels that keep a flat brick table (Level::denseBricks): 4 bytes per brick of the whole cube,
+/// 1 MB at level 8; finer levels probe the tree.
+constexpr int kDenseBrickLevel = 8;
 
 /// Build a level's topology and compact attributes from sorted full-precision arrays.
 Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
@@ -229,6 +249,14 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
   }
   out.brickMask.shrink_to_fit();
   out.brickBase.shrink_to_fit();
+  if (level <= kDenseBrickLevel) {
+    const size_t side = out.resolution >> 2;
+    out.denseBricks.assign(std::max<size_t>(1, side * side * side), -1);
+    for (auto it = out.tree->cbeginValueOn(); it; ++it) {
+      const openvdb::Coord c = it.getCoord();
+      out.denseBricks[(size_t(c.z()) * side + size_t(c.y())) * side + size_t(c.x())] = int32_t(*it);
+    }
+  }
   out.coverage.resize(a.size());
   out.normal.resize(a.size());
   // Albedo is kept at the finest level only: injection reads it there, and nothing samples
@@ -363,7 +391,7 @@ void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec
   const Vec3 f = q - base;
   const int32_t i0 = int32_t(base.x), j0 = int32_t(base.y), k0 = int32_t(base.z);
   const int32_t res = int32_t(lv.resolution);
-  IndexAccessor access(*lv.tree);
+  IndexAccessor access(*lv.tree);  // unused where the level has a flat brick table
   // Bricks of the corners: (i0 + d) >> 2 is i0 >> 2 or one more, per axis. -2: not probed yet.
   int64_t bricks[8] = {-2, -2, -2, -2, -2, -2, -2, -2};
   for (int c = 0; c < 8; ++c) {
@@ -374,10 +402,7 @@ void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec
     if (i < 0 || j < 0 || k < 0 || i >= res || j >= res || k >= res) continue;
     const int slot = ((i >> 2) - (i0 >> 2)) | (((j >> 2) - (j0 >> 2)) << 1) | (((k >> 2) - (k0 >> 2)) << 2);
     int64_t& b = bricks[slot];
-    if (b == -2) {
-      uint32_t index = 0;
-      b = access.probeValue(openvdb::Coord(i >> 2, j >> 2, k >> 2), index) ? int64_t(index) : -1;
-    }
+    if (b == -2) b = lv.brickAt(i >> 2, j >> 2, k >> 2, access);
     if (b < 0) continue;
     const uint32_t bit = voxel::brickBit(uint32_t(i), uint32_t(j), uint32_t(k));
     const uint64_t mask = lv.brickMask[size_t(b)];
