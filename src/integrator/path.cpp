@@ -15,7 +15,9 @@ PathIntegrator::PathIntegrator(const IntegratorContext& c)
   r.finish();
 }
 
-nlohmann::json PathIntegrator::settingsJson() const { return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}, {"light_sampling", m_nee ? "nee" : "none"}}; }
+nlohmann::json PathIntegrator::settingsJson() const {
+  return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}, {"light_sampling", m_nee ? "nee" : "none"}};
+}
 
 Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
   Vec3 L(0.0f), beta(1.0f);
@@ -53,7 +55,9 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
       if (ls.pdf > 0.0f) {
         const Vec3 wi = frame.toLocal(ls.wi);
         const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
-        if (!isBlack(f) && !m_accel.occluded(spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal))) {
+        const Ray shadow =
+            spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
+        if (!isBlack(f) && !m_accel.occluded(shadow)) {
           const float w = ls.delta ? 1.0f : powerHeuristic(ls.pdf, bsdfPdf(mat, wo, wi));
           L += beta * f * ls.radiance * (w / ls.pdf);
         }

@@ -23,13 +23,12 @@ namespace {
 constexpr float kClearance = 1.0f + 0.8660254f;
 /// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
 constexpr float kOpaque = 0.99f;
-/// Defaults chosen by time to error against path at 4096 spp (256x256, 2 threads, 16 spp,
-/// 100k photons): cornell-box level 5/6/7 at 4 gathers 1.14 s 35.66 dB / 1.67 s 36.17 dB /
-/// 2.49 s 36.09 dB (1.14 s / 1.67 s / 2.49 s where path needs 1.61 / 1.76 / 1.73 s for that
-/// error); cornell-dragon 37.76 / 38.62 / 38.81 dB in 1.93 / 2.41 / 3.05 s. Level 6 keeps the
-/// dragon's detail for 0.5 s more than 5. Gathers (250k photons): 2 / 3 / 4 / 8 of 16 spp at level 6
-/// give 34.22 / 35.39 / 36.24 / 37.94 dB in 1.23 / 1.55 / 1.91 / 3.21 s; more spp at 4 gathers add
-/// little (32 spp: +0.1 dB): past a few samples the error is the cones' noise and bias.
+/// Defaults chosen by time to error against path at 4096 spp (cornell-box and cornell-dragon,
+/// 256x256, 16 spp, 2 threads; the README's "Where voxcone's time goes" has the figures): level
+/// 6 (level 5 is faster on cornell-box but loses 0.9 dB on the dragon, level 7 costs 1.5x for
+/// +0.2 dB) and cones on 4 of a pixel's samples (2 / 3 / 4 / 8 gathers: 34.2 / 35.4 / 36.2 /
+/// 37.9 dB on cornell-box; 32 spp at 4 gathers adds 0.1 dB: past a few samples the error is the
+/// cones' noise and bias, not the direct light's).
 constexpr int kDefaultLevel = 6;
 constexpr int kDefaultGathers = 4;
 /// Names of VoxelConeIntegrator::View, in order.
