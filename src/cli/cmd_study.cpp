@@ -163,9 +163,11 @@ nlohmann::json sweepManifest(const SweepOptions& o) {
   } else {
     grid = {{{"method", "path"}, {"spp", {4, 16, 64, 256, 1024}}},
             {{"method", "pm"}, {"spp", 16}, {"options", {{"photons", {100000, 300000, 1000000}}}}},
-            // voxcone at 16 spp: cones on 2, 4, 8 or all 16 of each pixel's samples.
+            // voxcone at 16 spp: cones on 1, 2, 4, 8 or all 16 of each pixel's samples, with and
+            // without the screen-space indirect filter.
             {{"method", "voxcone"}, {"spp", 16},
-             {"options", {{"level", {5, 6, 7}}, {"photons", {100000, 250000}}, {"gathers", {2, 4, 8, 16}}}}},
+             {"options",
+              {{"level", {5, 6, 7}}, {"photons", 100000}, {"gathers", {1, 2, 4, 8, 16}}, {"filter", {0, 3}}}}},
             // render --target-error / --time-budget: where its choices land against the fronts.
             {{"method", "voxcone"}, {"target_error", {0.01, 0.005, 0.003}}},
             {{"method", "voxcone"}, {"time_budget", {5, 10, 20}}}};

@@ -9,9 +9,10 @@
 
 namespace voxcone {
 
-/// Radiance along `ray`: emission at every hit (when `withEmission`), `shade(hit, wo, sampler)` at
-/// the first non-delta surface, and at delta surfaces every lobe followed (reflection and
-/// refraction both, for glass) up to `maxDepth` segments. Splitting at every dielectric
+/// Radiance along `ray`: emission at every hit (when `withEmission`), `shade(hit, wo, sampler,
+/// depth)` at the first non-delta surface (depth 0: the ray's own first hit), and at delta
+/// surfaces every lobe followed (reflection and refraction both, for glass) up to `maxDepth`
+/// segments. Splitting at every dielectric
 /// doubles the rays per level, so branches whose accumulated weight (`throughput`, the largest
 /// channel of the product of lobe weights) falls below 1/1000 are dropped: they cannot change
 /// the pixel visibly.
@@ -23,7 +24,7 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sa
   const Vec3 woWorld = -glm::normalize(ray.dir);
   Vec3 L = withEmission ? scene.emitted(sh, woWorld) : Vec3(0.0f);
   const Material& mat = scene.materials[sh.material];
-  if (!mat.isDelta()) return L + shade(sh, woWorld, sampler);
+  if (!mat.isDelta()) return L + shade(sh, woWorld, sampler, depth);
   if (depth + 1 >= maxDepth) return L;
   const Frame frame(sh.shadingNormal);
   DeltaLobe lobes[2];

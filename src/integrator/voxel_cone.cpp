@@ -7,8 +7,11 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/timer.h"
+#include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/whitted.h"
 #include "voxcone/scene/bsdf.h"
+
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -30,7 +33,8 @@ constexpr float kOpaque = 0.99f;
 /// 37.9 dB on cornell-box; 32 spp at 4 gathers adds 0.1 dB: past a few samples the error is the
 /// cones' noise and bias, not the direct light's).
 constexpr int kDefaultLevel = 6;
-constexpr int kDefaultGathers = 4;
+constexpr int kDefaultGathers = 2;
+constexpr int kDefaultFilterRadius = 3;
 /// Names of VoxelConeIntegrator::View, in order.
 const std::vector<std::string> kViewNames = {"full", "direct", "indirect", "caustic", "field"};
 }  // namespace
@@ -68,6 +72,7 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   m_maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
   m_lightSamples = r.integer("light_samples", 1, 1, 1024);
   m_gathers = r.integer("gathers", kDefaultGathers, 0, 1 << 24);
+  m_filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 16);
   m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
   m_hitGather = r.choice("gather", {"march", "hit"}) == "hit";
   const std::string view = r.choice("view", kViewNames);
@@ -90,6 +95,7 @@ nlohmann::json VoxelConeIntegrator::settingsJson() const {
           {"max_distance", m_maxDistance},
           {"light_samples", m_lightSamples},
           {"gathers", m_gathers},
+          {"filter", m_filterRadius},
           {"exact_segment", m_exactSegment},
           {"gather", m_hitGather ? "hit" : "march"},
           {"view", kViewNames[size_t(m_view)]}};
@@ -222,7 +228,8 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& pError, const Vec
   return C;
 }
 
-Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler) const {
+Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler,
+                                 IndirectSplit* split) const {
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in traceCone).
@@ -245,20 +252,32 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   const Vec3 wo = frame.toLocal(woWorld);
   if (mat.isDiffuse()) {
     if (m_view != View::Indirect) L += m_field.causticRadiance(sh.position, viewFrom(ng, m_causticVoxel));
-    if (m_view == View::Caustic || gatherWeight == 0.0f) return L;
+    if (m_view == View::Caustic) return L;
+    if (split) {
+      split->valid = true;
+      split->position = sh.position;
+      split->normal = ng;
+      split->material = sh.material;
+    }
+    if (gatherWeight == 0.0f) return L;
     // The cone set turned by a random angle about the normal; each cone weighted by
     // f(wo, axis) * pi * w_i, which is albedo * w_i for a Lambertian surface.
     const float rotation = 2.0f * kPi * sampler.uniform();
     const float cr = std::cos(rotation), sr = std::sin(rotation);
     const Frame geo(ng);
+    Vec3 indirect(0.0f);
     for (const Cone& cone : m_cones.cones()) {
       const Vec3 d = geo.toWorld(
           Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
       const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
       if (isBlack(f)) continue;
-      L += (gatherWeight * cone.weight) * f * traceCone(sh.position, sh.positionError, ng, d, m_tanHalf);
+      indirect += (gatherWeight * cone.weight) * f * traceCone(sh.position, sh.positionError, ng, d, m_tanHalf);
     }
-    return L;
+    if (split) {
+      split->indirect = indirect;
+      return L;
+    }
+    return L + indirect;
   }
   if (m_view == View::Caustic || gatherWeight == 0.0f) return L;
   // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
@@ -273,12 +292,47 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   return L;
 }
 
-Vec3 VoxelConeIntegrator::li(const Ray& ray, Sampler& sampler) const {
+Vec3 VoxelConeIntegrator::trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const {
   if (!m_prepared) throw Error("voxcone: li() before prepare()");
   // Emission is seen directly or through delta bounces (shadow rays sample it elsewhere).
   const bool emission = m_view == View::Full || m_view == View::Direct;
+  // Only the camera ray's own first hit is split off for the screen-space filter.
   return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, emission,
-                          [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px) { return shade(sh, wo, px); });
+                          [this, split](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int depth) {
+                            return shade(sh, wo, px, depth == 0 ? split : nullptr);
+                          });
+}
+
+Vec3 VoxelConeIntegrator::li(const Ray& ray, Sampler& sampler) const { return trace(ray, sampler, nullptr); }
+
+void VoxelConeIntegrator::linkIndirect(IndirectBuffer& b) const {
+  b.link.assign(b.indirect.size(), 0u);
+  tbb::parallel_for(0, b.height, [&](int y) {
+    for (int x = 0; x < b.width; ++x) {
+      const size_t p = size_t(y) * size_t(b.width) + size_t(x);
+      if (!b.filterable[p]) continue;
+      const size_t right = p + 1, below = p + size_t(b.width);
+      const bool has[2] = {x + 1 < b.width, y + 1 < b.height};
+      const size_t q[2] = {right, below};
+      for (int bit = 0; bit < 2; ++bit) {
+        if (!has[bit] || !sameFilterSurface(b, p, q[bit])) continue;
+        // Both ends a quarter of the pixel's footprint above the surface: an occluder between
+        // the two points (a wall seen edge-on) cuts the link, the surface itself cannot.
+        const Vec3 from = b.position[p] + b.normal[p] * (0.25f * b.footprint[p]);
+        const Vec3 to = b.position[q[bit]] + b.normal[q[bit]] * (0.25f * b.footprint[p]);
+        Ray r;
+        r.origin = from;
+        r.dir = to - from;
+        r.tMax = 1.0f;
+        if (!m_accel.occluded(r)) b.link[p] |= uint8_t(1u << bit);
+      }
+    }
+  });
+}
+
+Vec3 VoxelConeIntegrator::liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const {
+  split = IndirectSplit();
+  return trace(ray, sampler, &split);
 }
 
 }  // namespace voxcone

@@ -37,7 +37,7 @@ Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHi
 }
 
 Vec3 WhittedIntegrator::li(const Ray& ray, Sampler& sampler) const {
-  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px) {
+  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int) {
     return estimateDirectLight(m_scene, m_accel, sh, wo, px, m_lightSamples);
   };
   return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, true, direct);

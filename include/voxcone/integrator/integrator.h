@@ -18,6 +18,17 @@
 namespace voxcone {
 
 class Accel;
+struct IndirectBuffer;
+
+/// What one sample's first surface hands to the screen-space filter of indirect light
+/// (Integrator::liSplit, renderImage).
+struct IndirectSplit {
+  Vec3 indirect{0.0f};   ///< the filterable part of the sample's radiance (not in liSplit's return)
+  Vec3 position{0.0f};   ///< the first hit, world space
+  Vec3 normal{0.0f};     ///< its unit geometric normal on the viewer's side
+  uint32_t material = 0;
+  bool valid = false;    ///< the first hit is a surface whose indirect light is filterable
+};
 
 /// Estimates the radiance arriving along camera rays. Implementations are immutable while
 /// rendering (`li` is called concurrently); per-render work happens in `prepare`.
@@ -31,6 +42,15 @@ public:
   /// Radiance along `ray` (a camera ray); `sampler` is this pixel's sample source, at the
   /// current sample (core/sampler.h).
   virtual Vec3 li(const Ray& ray, Sampler& sampler) const = 0;
+  /// Radius in pixels of the screen-space filter renderImage applies to the indirect light
+  /// liSplit separates (0: no filter, renderImage calls li).
+  virtual int indirectFilterRadius() const { return 0; }
+  /// li, except that the indirect light of a filterable first hit goes into `split` (with the
+  /// hit's position, normal and material) instead of the return value.
+  virtual Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const { return li(ray, sampler); }
+  /// Fill buffer.link (indirect_filter.h) before the filter runs: which adjacent pixels' points
+  /// see each other. The default links none, so the filter keeps every pixel's own value.
+  virtual void linkIndirect(IndirectBuffer& buffer) const;
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
   /// Statistics gathered in prepare/li, as JSON.
@@ -67,8 +87,10 @@ struct RenderResult {
 /// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its samples from
 /// Sampler(settings.sampler, settings.seed, y * width + x), sample s starting at dimension 0,
 /// its first slot the jitter, so the image is bit-identical at any thread count.
-/// Box pixel filter: each sample is uniform in the pixel's square. Throws CancelledError when
-/// `progress` reports cancellation.
+/// Box pixel filter: each sample is uniform in the pixel's square. With an indirect filter
+/// radius, each pixel's indirect light (liSplit) is replaced by its neighbours' weighted mean
+/// where all its samples saw one surface (filterIndirect, deterministic). Throws CancelledError
+/// when `progress` reports cancellation.
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                          Progress* progress = nullptr);
 

@@ -64,6 +64,10 @@
 ///    expected value is unchanged, direct light, edges and specular chains keep every sample,
 ///    and the cones (98% of the time) cost gathers instead of spp. The stratified sampler gives
 ///    those samples' cone rotations and positions a stratified subset of the pixel;
+///  - `filter`: radius in pixels of the screen-space filter of the cones' indirect light at
+///    camera-visible diffuse surfaces (renderImage, filterIndirect; 0: off): each pixel whose
+///    samples all saw one surface takes the Gaussian-weighted mean of its neighbours' indirect
+///    light on the same material, normal and plane;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
 ///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
 ///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
@@ -92,6 +96,11 @@ public:
   std::string name() const override { return "voxcone"; }
   void prepare(Progress* progress) override;
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
+  int indirectFilterRadius() const override { return m_filterRadius; }
+  Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
+  /// Adjacent pixels on one surface are linked when an exact ray between their points, a
+  /// quarter of a footprint above the surface, meets nothing.
+  void linkIndirect(IndirectBuffer& buffer) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
@@ -101,7 +110,11 @@ private:
   /// The radiance one cone gathers from surface point p (unit normal n on the side the cone
   /// leaves, unit direction d with dot(n, d) > 0 expected), half-angle atan(tanHalf).
   Vec3 traceCone(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
-  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler) const;
+  /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
+  /// hit goes there instead (with the hit's position, normal and material).
+  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
+  /// li, with the first hit's indirect light in `split` when it is given.
+  Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
   /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
   /// the hit surface's normal turned towards the ray's side.
   struct AxisHit {
@@ -122,6 +135,7 @@ private:
   float m_maxDistance = 0.0f;
   int m_lightSamples = 1;
   int m_gathers = 0;            ///< pixel samples that gather indirect light (0: all)
+  int m_filterRadius = 0;       ///< screen-space indirect filter radius, pixels (0: off)
   float m_exactSegment = 0.0f;  ///< finest voxels
   bool m_hitGather = false;     ///< gather = "hit": one exact ray per cone, field filtered at the hit
   enum class View { Full, Direct, Indirect, Caustic, Field } m_view = View::Full;

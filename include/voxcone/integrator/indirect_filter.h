@@ -1,0 +1,47 @@
+#pragma once
+/// \file indirect_filter.h
+/// The screen-space filter of indirect light that renderImage applies for integrators with an
+/// indirect filter radius (voxcone's `filter`): a cross-bilateral filter (Eisemann & Durand
+/// 2004; the geometry-aware weights of edge-avoiding filters, Dammertz et al. 2010, "Edge-
+/// Avoiding A-Trous Wavelet Transform for fast Global Illumination Filtering") over each
+/// pixel's indirect light at camera-visible diffuse surfaces. Indirect light there is smooth
+/// along a surface while the cones' estimate of it is noisy, so averaging neighbours that see
+/// the same surface trades noise for a little blur, and never mixes surfaces: a neighbour
+/// counts only on the same material, with a normal within 25 degrees, within two of the
+/// pixel's footprints of its tangent plane, and reachable from the pixel through a chain of
+/// linked neighbours (`link`: the integrator's exact rays between adjacent pixels' points), so
+/// light never crosses an occluder thinner than a pixel, such as a wall seen edge-on between two
+/// rooms that share one floor.
+
+#include "voxcone/core/math.h"
+
+#include <vector>
+
+namespace voxcone {
+
+/// Per-pixel inputs of filterIndirect, row-major, width x height.
+struct IndirectBuffer {
+  int width = 0, height = 0;
+  std::vector<Vec3> indirect;      ///< the pixel's indirect light (mean over its samples)
+  std::vector<Vec3> position;      ///< mean first-hit position of its samples, world space
+  std::vector<Vec3> normal;        ///< unit geometric normal of that surface, viewer side
+  std::vector<uint32_t> material;
+  std::vector<float> footprint;    ///< world-space width of the pixel at its hit (> 0)
+  std::vector<uint8_t> filterable; ///< every sample saw this one surface (else kept as is)
+  /// Bit 0: the pixel and its right neighbour see each other's points; bit 1: the same for the
+  /// one below. Empty: every pair of adjacent pixels is linked.
+  std::vector<uint8_t> link;
+};
+
+/// Whether adjacent pixels p and q (filterable) see one surface by the filter's tests: the same
+/// material, normals within 25 degrees, q within two of p's footprints of p's tangent plane.
+bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q);
+
+/// The filtered indirect light of every pixel: filterable pixels take the weighted mean of the
+/// filterable pixels within `radius` (pixels) that pass the surface tests and are reachable
+/// through links inside the window, with Gaussian
+/// weights of standard deviation radius / 2 in the image times the cosine of the normals to the
+/// eighth power; the others keep their own value. Deterministic (no order dependence).
+std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius);
+
+}  // namespace voxcone
