@@ -167,43 +167,36 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
   }
 }
 
-TEST(VoxelCone, GatheringOnFewSamplesKeepsTheMeanInEveryRegion) {
-  // gathers = 2 of 16 spp (cones weighted 8) against cones on every sample: the same expected
-  // image, so the means of the image's two halves agree within their noise (bounded at 3%; a
-  // missing weight would be -87% of the indirect light, a doubled one +100%).
+/// voxcone on cornell-box (res x res, `spp`, one seed: the same photons and first samples) with
+/// options `a` and with `a` updated by `b`: the means of the image's left and right halves
+/// agree per channel within `tolerance`.
+void expectHalvesAgree(int res, int spp, const nlohmann::json& a, const nlohmann::json& b, double tolerance) {
   const Scene scene = test::cornellBox();
   RenderSettings s = scene.render;
-  s.width = s.height = 32;
-  s.spp = 16;
-  const nlohmann::json base = {{"level", 5}, {"photons", 20000}};
-  nlohmann::json few = base;
-  few["gathers"] = 2;
-  // One seed: the same photons (the field's noise is shared), the same first two samples.
-  const Image every = renderWith(scene, "voxcone", s, base).image;
-  const Image some = renderWith(scene, "voxcone", s, few).image;
-  for (int x0 : {0, 16}) {
-    const Vec3 a = imageMean(every, x0, x0 + 16), b = imageMean(some, x0, x0 + 16);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(b[c] / a[c], 1.0, 0.03) << "columns from " << x0 << ", channel " << c;
+  s.width = s.height = res;
+  s.spp = spp;
+  nlohmann::json changed = a;
+  changed.update(b);
+  const Image first = renderWith(scene, "voxcone", s, a).image;
+  const Image second = renderWith(scene, "voxcone", s, changed).image;
+  for (int x0 : {0, res / 2}) {
+    const Vec3 ma = imageMean(first, x0, x0 + res / 2), mb = imageMean(second, x0, x0 + res / 2);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(mb[c] / ma[c], 1.0, tolerance) << b.dump() << ": columns from " << x0 << ", channel " << c;
   }
 }
 
+TEST(VoxelCone, GatheringOnFewSamplesKeepsTheMeanInEveryRegion) {
+  // gathers = 2 of 16 spp (cones weighted 8) against cones on every sample: the same expected
+  // image, so the halves' means agree within their noise (bounded at 3%; a missing weight would
+  // be -87% of the indirect light, a doubled one +100%).
+  expectHalvesAgree(32, 16, {{"level", 5}, {"photons", 20000}, {"gathers", 0}, {"filter", 0}}, {{"gathers", 2}}, 0.03);
+}
+
 TEST(VoxelCone, TheIndirectFilterKeepsTheMeanInEveryRegion) {
-  // The screen-space filter of the cones' indirect light (filter 3) against none, same seed:
-  // region means (left and right halves, top and bottom halves) within 2%: it blurs, it does
-  // not add or lose light.
-  const Scene scene = test::cornellBox();
-  RenderSettings s = scene.render;
-  s.width = s.height = 48;
-  s.spp = 8;
-  const nlohmann::json base = {{"level", 5}, {"photons", 20000}, {"gathers", 2}};
-  nlohmann::json off = base;
-  off["filter"] = 0;
-  const Image filtered = renderWith(scene, "voxcone", s, base).image;
-  const Image unfiltered = renderWith(scene, "voxcone", s, off).image;
-  for (int x0 : {0, 24}) {
-    const Vec3 a = imageMean(unfiltered, x0, x0 + 24), b = imageMean(filtered, x0, x0 + 24);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(b[c] / a[c], 1.0, 0.02) << "columns from " << x0 << ", channel " << c;
-  }
+  // The screen-space filter of the cones' indirect light (radius 3) against none: the halves'
+  // means within 2%: it blurs, it does not add or lose light.
+  expectHalvesAgree(48, 8, {{"level", 5}, {"photons", 20000}, {"gathers", 2}, {"filter", 0}}, {{"filter", 3}}, 0.02);
 }
 
 TEST(VoxelCone, SameImageAtOneAndTwoThreads) {

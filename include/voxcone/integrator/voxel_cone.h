@@ -58,16 +58,16 @@
 ///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
 ///    default: the scene's bounding-sphere diameter);
 ///  - `light_samples` (shadow rays per shading point, default 1);
-///  - `gathers`: how many of a pixel's samples gather indirect light by cones (default 4; 0:
+///  - `gathers`: how many of a pixel's samples gather indirect light by cones (default 2; 0:
 ///    every one).
 ///    With spp > gathers, only samples 0 .. gathers-1 gather, weighted spp / gathers: the pixel's
 ///    expected value is unchanged, direct light, edges and specular chains keep every sample,
 ///    and the cones (98% of the time) cost gathers instead of spp. The stratified sampler gives
 ///    those samples' cone rotations and positions a stratified subset of the pixel;
 ///  - `filter`: radius in pixels of the screen-space filter of the cones' indirect light at
-///    camera-visible diffuse surfaces (renderImage, filterIndirect; 0: off): each pixel whose
-///    samples all saw one surface takes the Gaussian-weighted mean of its neighbours' indirect
-///    light on the same material, normal and plane;
+///    camera-visible diffuse surfaces (renderImage, filterIndirect; default 3, 0: off): each
+///    pixel whose samples all saw one surface takes the Gaussian-weighted mean of its linked
+///    neighbours' indirect light on the same material, normal and plane;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
 ///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
 ///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
