@@ -2,6 +2,7 @@
 // exit and no output for bad input.
 
 #include "../support/test_scenes.h"
+#include "voxcone/image/image_io.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -58,6 +59,22 @@ TEST(Cli, RenderWritesExrPngAndSidecar) {
   EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 3);
 }
 
+TEST(Cli, SamplerIsChosenAndRecorded) {
+  // --sampler picks the pixel sampler and the sidecar says which; the two give different images
+  // of the same scene and seed.
+  const fs::path d = freshDir("cli_sampler");
+  const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
+  for (const char* sampler : {"sobol", "independent"}) {
+    const RunResult r = run("render " + scene + " --method path -q --res 16x16 --spp 4 --sampler " + sampler +
+                            " -o " + (d / sampler).string());
+    ASSERT_EQ(r.code, 0) << r.err;
+    std::ifstream f(d / (std::string(sampler) + ".json"));
+    EXPECT_EQ(nlohmann::json::parse(f)["settings"]["sampler"], sampler);
+  }
+  const Image a = readImage((d / "sobol.exr").string()), b = readImage((d / "independent.exr").string());
+  EXPECT_NE(a.pixels, b.pixels);
+}
+
 TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   const fs::path d = freshDir("cli_bad");
   const std::string scenes = test::sourceDir() + "/data/scenes/";
@@ -75,6 +92,7 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --res 0x10 -o " + (d / "e").string(),
       "render " + scenes + "cornell-box.json -q --res banana -o " + (d / "f").string(),
       "render " + scenes + "cornell-box.json -q --options '{\"x\":1}' -o " + (d / "g").string(),
+      "render " + scenes + "cornell-box.json -q --sampler halton -o " + (d / "h").string(),
       "render " + scenes + "cornell-box.json -q -o /nonexistent-dir/x",
       "info /nonexistent.json",
       "compare /nonexistent1.exr /nonexistent2.exr",

@@ -66,6 +66,7 @@ TEST(SceneLoader, BadInputNamesTheKeyPath) {
       {replaced(m, "\"emission\": [1, 1, 1]", "\"emission\": [0, 0, 0]"), "no light"},
       {replaced(m, "\"camera\"", "\"render\": {\"spp\": 0}, \"camera\""), "render.spp: value 0 out of range"},
       {replaced(m, "\"camera\"", "\"render\": {\"width\": 1.5}, \"camera\""), "render.width: expected an integer"},
+      {replaced(m, "\"camera\"", "\"render\": {\"sampler\": \"halton\"}, \"camera\""), "render.sampler: unknown sampler 'halton'"},
       {replaced(m, "\"target\": [0, 0, 0]", "\"target\": [0, 0, -5]"), "camera.target: target equals position"},
       {replaced(m, "\"materials\"", "\"extra\": {}, \"materials\""), "extra: unknown key"},
   };
