@@ -7,9 +7,13 @@ namespace voxcone {
 namespace {
 /// Neighbours' normals within acos(0.9) = 25.8 degrees of the pixel's: curved surfaces keep
 /// their neighbours (the dragon's flat-shaded facets), creases and corners do not.
+/// Measured (256x256 defaults): 0.8 and 0.97 give the same error on cornell-box (38.27 dB) and
+/// cornell-dragon (39.00 dB): the walls meet at 90 degrees, and the dragon's filterable pixels
+/// are already limited by renderImage's within-pixel test.
 constexpr float kMinNormalCos = 0.9f;
 /// Neighbours within this many of the pixel's footprints of its tangent plane: the same
-/// surface, not one behind it or in front.
+/// surface, not one behind it or in front. 1 and 4 measured as 2 (38.27 / 39.00 dB); the step
+/// test (indirect_filter tests) needs it below 3.
 constexpr float kPlaneFootprints = 2.0f;
 }  // namespace
 
@@ -23,6 +27,8 @@ std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
   const int w = in.width, h = in.height;
   std::vector<Vec3> out = in.indirect;
   if (radius <= 0) return out;
+  // The window's edge at 2 sigma: the Gaussian has fallen to e^-2 there, so cutting it off
+  // loses little weight.
   const float sigma = 0.5f * float(radius);
   const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
   const int side = 2 * radius + 1;
@@ -46,7 +52,9 @@ std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
         const int c = queue[head++];
         const int qx = x - radius + c % side, qy = y - radius + c / side;
         const size_t q = size_t(qy) * size_t(w) + size_t(qx);
-        // Its weight, then its linked neighbours on the centre's surface.
+        // Its weight (Gaussian in the image times cos^8 of the normals: a soft edge inside the
+        // 25-degree cut; measured, dropping it leaves both canonical scenes' error unchanged),
+        // then its linked neighbours on the centre's surface.
         const float cosN = glm::dot(in.normal[p], in.normal[q]);
         const float d2 = float(sqr(qx - x) + sqr(qy - y));
         const float c2 = cosN * cosN, c4 = c2 * c2;
@@ -60,9 +68,9 @@ std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
           const size_t cq = cell(nx[k], ny[k]);
           if (reached[cq]) continue;
           const size_t n = size_t(ny[k]) * size_t(w) + size_t(nx[k]);
-          // The link between q and n is stored on the left or upper one of the two.
-          const bool link = k == 0 ? linked(q, 0) : k == 1 ? linked(n, 0) : k == 2 ? linked(q, 1) : linked(n, 1);
-          if (!link || !sameFilterSurface(in, p, n)) continue;
+          // The link between q and n is stored on the left or upper one of the two: q for the
+          // right and lower neighbours (k = 0, 2), n for the left and upper ones; bit k / 2.
+          if (!linked(k % 2 == 0 ? q : n, k / 2) || !sameFilterSurface(in, p, n)) continue;
           reached[cq] = 1;
           queue[tail++] = int(cq);
         }

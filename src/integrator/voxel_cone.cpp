@@ -312,9 +312,9 @@ void VoxelConeIntegrator::linkIndirect(IndirectBuffer& b) const {
     for (int x = 0; x < b.width; ++x) {
       const size_t p = size_t(y) * size_t(b.width) + size_t(x);
       if (!b.filterable[p]) continue;
-      const size_t right = p + 1, below = p + size_t(b.width);
+      // Bit 0: the right neighbour, bit 1: the one below.
       const bool has[2] = {x + 1 < b.width, y + 1 < b.height};
-      const size_t q[2] = {right, below};
+      const size_t q[2] = {p + 1, p + size_t(b.width)};
       for (int bit = 0; bit < 2; ++bit) {
         if (!has[bit] || !sameFilterSurface(b, p, q[bit])) continue;
         // Both ends a quarter of the pixel's footprint above the surface: an occluder between

@@ -386,17 +386,29 @@ Scene transformedCornellBox(const std::function<DVec3(const DVec3&)>& point,
   return parseScene(j.dump(), "cornell-box (transformed)", ".");
 }
 
+/// cornell-box at res x res and `spp`, the shape each pixel centre sees, and path's image.
+struct CornellPath {
+  Scene scene;
+  RenderSettings settings;
+  std::vector<int> regions;
+  Image image;
+};
+CornellPath cornellPath(int res, int spp) {
+  CornellPath c{test::cornellBox(), {}, {}, {}};
+  c.settings = c.scene.render;
+  c.settings.width = c.settings.height = res;
+  c.settings.spp = spp;
+  c.regions = regionMap(c.scene, Hbvh(c.scene), res, res);
+  c.image = renderWith(c.scene, "path", c.settings).image;
+  return c;
+}
+
 TEST(CornellRegions, TranslatedAndRotatedBoxesRenderTheSameImage) {
   // The box and camera moved by thousands of millimetres (to negative and positive
   // coordinates), and turned by 90 degrees about y and about x (exact in float): path's image
   // must not change region by region beyond noise. Surfaces near coordinate 0 were 25% dark
   // and moved 3% when moved away.
-  const Scene base = test::cornellBox();
-  RenderSettings s = base.render;
-  s.width = s.height = 96;
-  s.spp = 64;
-  const std::vector<int> regions = regionMap(base, Hbvh(base), s.width, s.height);
-  const Image reference = renderWith(base, "path", s).image;
+  const CornellPath base = cornellPath(96, 64);
   struct Case {
     std::string name;
     std::function<DVec3(const DVec3&)> point, vector;
@@ -411,9 +423,9 @@ TEST(CornellRegions, TranslatedAndRotatedBoxesRenderTheSameImage) {
   };
   for (const Case& c : cases) {
     const Scene moved = transformedCornellBox(c.point, c.vector);
-    RenderSettings ms = s;
-    ms.seed = s.seed + 1;
-    expectRegionsAgree(regionDiffs(base, regions, reference, renderWith(moved, "path", ms).image), c.name);
+    RenderSettings ms = base.settings;
+    ms.seed = base.settings.seed + 1;
+    expectRegionsAgree(regionDiffs(base.scene, base.regions, base.image, renderWith(moved, "path", ms).image), c.name);
   }
 }
 
@@ -422,16 +434,12 @@ TEST(CornellRegions, PathAgreesWithBsdfSamplingAloneInEveryRegion) {
   // default; both are unbiased, so every region (walls, floor, ceiling, block faces) must agree
   // within noise. The BSDF-only estimate is noisy (the light is small): 1024 spp at 48x48 still
   // leaves 1-1.5% standard error on the room's surfaces, so a 7% difference is what shows.
-  const Scene scene = test::cornellBox();
-  RenderSettings s = scene.render;
-  s.width = s.height = 48;
-  s.spp = 256;
-  const std::vector<int> regions = regionMap(scene, Hbvh(scene), s.width, s.height);
-  const Image nee = renderWith(scene, "path", s).image;
+  const CornellPath nee = cornellPath(48, 256);
+  RenderSettings s = nee.settings;
   s.spp = 1024;
   s.seed = 7;
-  const Image bsdfOnly = renderWith(scene, "path", s, {{"light_sampling", "none"}}).image;
-  expectRegionsAgree(regionDiffs(scene, regions, nee, bsdfOnly), "nee vs bsdf-only", 0.07);
+  const Image bsdfOnly = renderWith(nee.scene, "path", s, {{"light_sampling", "none"}}).image;
+  expectRegionsAgree(regionDiffs(nee.scene, nee.regions, nee.image, bsdfOnly), "nee vs bsdf-only", 0.07);
 }
 
 // ---------------------------------------------------------------------------------------------
