@@ -23,61 +23,97 @@ bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q) {
          std::fabs(glm::dot(in.normal[p], in.position[q] - in.position[p])) <= kPlaneFootprints * in.footprint[p];
 }
 
-std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
+namespace {
+bool isEstimated(const IndirectBuffer& in, size_t p) { return in.estimated.empty() || in.estimated[p]; }
+
+/// The filter's weighted sums: num / den is a pixel's filtered light (den 0: no estimated pixel
+/// reached). Separable, rows then columns (as a separable bilateral filter): the row pass sums
+/// each pixel's estimated neighbours along its row, the column pass sums the row pass's sums
+/// along the column. Each pass walks from the pixel outwards and stops at the first neighbour
+/// that is not linked to the previous one or not on the walk's start's surface
+/// (sameFilterSurface), so light reaches a pixel only along an L-shaped chain of links.
+/// Weights: a Gaussian of standard deviation radius / 2 per axis (their product is the 2D
+/// Gaussian), times cos^8 of the normals (a soft edge inside the 25-degree cut; measured,
+/// dropping it leaves both canonical scenes' error unchanged). Fixed order: no thread dependence.
+void filterSums(const IndirectBuffer& in, int radius, std::vector<DVec3>& num, std::vector<double>& den) {
   const int w = in.width, h = in.height;
+  const size_t n = size_t(w) * size_t(h);
+  const auto linked = [&](size_t a, int bit) { return in.link.empty() || ((in.link[a] >> bit) & 1u); };
+  // The window's edge at 2 sigma: the Gaussian has fallen to e^-2 there.
+  const float sigma = 0.5f * float(radius);
+  std::vector<float> gauss(size_t(radius) + 1);
+  for (int d = 0; d <= radius; ++d) gauss[size_t(d)] = std::exp(-float(d * d) / (2.0f * sigma * sigma));
+  const auto cos8 = [&](size_t a, size_t b) {
+    const float c = glm::dot(in.normal[a], in.normal[b]), c2 = c * c, c4 = c2 * c2;
+    return c4 * c4;
+  };
+  // One pass: along `stride` (1: rows, width: columns), bit 0 / 1 the link to the next pixel.
+  const auto pass = [&](const std::vector<DVec3>& srcNum, const std::vector<double>& srcDen, int bit,
+                        std::vector<DVec3>& dstNum, std::vector<double>& dstDen) {
+    dstNum.assign(n, DVec3(0.0));
+    dstDen.assign(n, 0.0);
+    const size_t stride = bit == 0 ? 1 : size_t(w);
+    tbb::parallel_for(0, h, [&](int y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t p = size_t(y) * size_t(w) + size_t(x);
+        if (!in.filterable[p]) continue;
+        const int pos = bit == 0 ? x : y, len = bit == 0 ? w : h;
+        DVec3 sn = srcNum[p];
+        double sd = srcDen[p];
+        for (int dir = -1; dir <= 1; dir += 2) {
+          size_t prev = p;
+          for (int d = 1; d <= radius; ++d) {
+            const int at = pos + dir * d;
+            if (at < 0 || at >= len) break;
+            const size_t q = dir > 0 ? prev + stride : prev - stride;
+            // The link between two neighbours is stored on the left or upper one.
+            if (!linked(dir > 0 ? prev : q, bit) || !sameFilterSurface(in, p, q)) break;
+            const double wq = double(gauss[size_t(d)] * cos8(p, q));
+            sn += wq * srcNum[q];
+            sd += wq * srcDen[q];
+            prev = q;
+          }
+        }
+        dstNum[p] = sn;
+        dstDen[p] = sd;
+      }
+    });
+  };
+  std::vector<DVec3> num0(n, DVec3(0.0));
+  std::vector<double> den0(n, 0.0);
+  for (size_t p = 0; p < n; ++p)
+    if (in.filterable[p] && isEstimated(in, p)) {
+      num0[p] = DVec3(in.indirect[p]);
+      den0[p] = 1.0;
+    }
+  std::vector<DVec3> rowNum;
+  std::vector<double> rowDen;
+  pass(num0, den0, 0, rowNum, rowDen);
+  pass(rowNum, rowDen, 1, num, den);
+}
+}  // namespace
+
+std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
   std::vector<Vec3> out = in.indirect;
   if (radius <= 0) return out;
-  // The window's edge at 2 sigma: the Gaussian has fallen to e^-2 there, so cutting it off
-  // loses little weight.
-  const float sigma = 0.5f * float(radius);
-  const float inv2s2 = 1.0f / (2.0f * sigma * sigma);
-  const int side = 2 * radius + 1;
-  const auto linked = [&](size_t a, int bit) { return in.link.empty() || ((in.link[a] >> bit) & 1u); };
-  tbb::parallel_for(0, h, [&](int y) {
-    // The window's pixels reached from the centre through links (breadth first), per row.
-    std::vector<uint8_t> reached(size_t(side) * side);
-    std::vector<int> queue(size_t(side) * side);
-    for (int x = 0; x < w; ++x) {
-      const size_t p = size_t(y) * size_t(w) + size_t(x);
-      if (!in.filterable[p]) continue;
-      std::fill(reached.begin(), reached.end(), uint8_t(0));
-      size_t head = 0, tail = 0;
-      const auto cell = [&](int qx, int qy) { return size_t(qy - y + radius) * side + size_t(qx - x + radius); };
-      reached[cell(x, y)] = 1;
-      queue[tail++] = int(cell(x, y));
-      // Summed in double in a fixed order (the queue's): the result does not depend on threads.
-      DVec3 sum(0.0);
-      double wsum = 0.0;
-      while (head < tail) {
-        const int c = queue[head++];
-        const int qx = x - radius + c % side, qy = y - radius + c / side;
-        const size_t q = size_t(qy) * size_t(w) + size_t(qx);
-        // Its weight (Gaussian in the image times cos^8 of the normals: a soft edge inside the
-        // 25-degree cut; measured, dropping it leaves both canonical scenes' error unchanged),
-        // then its linked neighbours on the centre's surface.
-        const float cosN = glm::dot(in.normal[p], in.normal[q]);
-        const float d2 = float(sqr(qx - x) + sqr(qy - y));
-        const float c2 = cosN * cosN, c4 = c2 * c2;
-        const double wq = double(std::exp(-d2 * inv2s2) * c4 * c4);
-        sum += wq * DVec3(in.indirect[q]);
-        wsum += wq;
-        const int nx[4] = {qx + 1, qx - 1, qx, qx}, ny[4] = {qy, qy, qy + 1, qy - 1};
-        for (int k = 0; k < 4; ++k) {
-          if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
-          if (std::abs(nx[k] - x) > radius || std::abs(ny[k] - y) > radius) continue;
-          const size_t cq = cell(nx[k], ny[k]);
-          if (reached[cq]) continue;
-          const size_t n = size_t(ny[k]) * size_t(w) + size_t(nx[k]);
-          // The link between q and n is stored on the left or upper one of the two: q for the
-          // right and lower neighbours (k = 0, 2), n for the left and upper ones; bit k / 2.
-          if (!linked(k % 2 == 0 ? q : n, k / 2) || !sameFilterSurface(in, p, n)) continue;
-          reached[cq] = 1;
-          queue[tail++] = int(cq);
-        }
-      }
-      if (wsum > 0.0) out[p] = Vec3(sum / wsum);
-    }
-  });
+  std::vector<DVec3> num;
+  std::vector<double> den;
+  filterSums(in, radius, num, den);
+  for (size_t p = 0; p < out.size(); ++p)
+    if (in.filterable[p] && den[p] > 0.0) out[p] = Vec3(num[p] / den[p]);
+  return out;
+}
+
+std::vector<uint8_t> unfilledPixels(const IndirectBuffer& in, int radius) {
+  std::vector<uint8_t> out(size_t(in.width) * size_t(in.height), 0u);
+  std::vector<DVec3> num;
+  std::vector<double> den;
+  if (radius <= 0) {
+    for (size_t p = 0; p < out.size(); ++p) out[p] = in.filterable[p] && !isEstimated(in, p);
+    return out;
+  }
+  filterSums(in, radius, num, den);
+  for (size_t p = 0; p < out.size(); ++p) out[p] = in.filterable[p] && !(den[p] > 0.0);
   return out;
 }
 

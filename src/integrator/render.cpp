@@ -1,4 +1,5 @@
 #include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/integrator.h"
@@ -19,6 +20,55 @@ constexpr float kSameSurfaceCos = 0.99f;
 
 /// A radiance estimate the image takes: finite and not negative.
 bool usableRadiance(const Vec3& v) { return isFinite(v) && v.x >= 0.0f && v.y >= 0.0f && v.z >= 0.0f; }
+
+/// A gather liSplit deferred, at its pixel.
+struct PendingGather {
+  size_t pixel = 0;
+  DeferredGather gather;
+};
+
+/// Whether pixel (x, y) is its spacing x spacing block's gathering pixel: one per block, at an
+/// offset drawn per block from the seed (a regular lattice would alias with the scene's edges).
+bool gathersInBlock(int x, int y, int spacing, uint64_t seed) {
+  if (spacing <= 1) return true;
+  const uint64_t block = (uint64_t(uint32_t(y / spacing)) << 32) | uint32_t(x / spacing);
+  const uint64_t hash = mixBits(block ^ mixBits(seed ^ 0x9e3779b97f4a7c15ull));
+  const int s = spacing;
+  return x % s == int(hash % uint64_t(s)) && y % s == int((hash >> 32) % uint64_t(s));
+}
+
+/// Run the deferred gathers of the pixels marked in `gathers` (in parallel, each on its own),
+/// and add each pixel's weighted gathers, in the list's order, to its indirect light.
+/// Throws CancelledError when `progress` reports cancellation.
+void runGathers(const Integrator& integrator, const std::vector<PendingGather>& pending,
+                const std::vector<uint8_t>& gathers, int spp, IndirectBuffer& ib, uint64_t& invalid,
+                Progress* progress) {
+  std::vector<Vec3> value(pending.size(), Vec3(0.0f));
+  constexpr size_t kChunk = 256;
+  const size_t chunks = (pending.size() + kChunk - 1) / kChunk;
+  std::atomic<bool> cancelled{false};
+  if (progress) progress->start("gather", chunks);
+  tbb::parallel_for(size_t(0), chunks, [&](size_t chunk) {
+    if (cancelled.load(std::memory_order_relaxed)) return;
+    if (progress && progress->cancelled()) {
+      cancelled = true;
+      return;
+    }
+    for (size_t i = chunk * kChunk; i < std::min(pending.size(), (chunk + 1) * kChunk); ++i)
+      if (gathers[pending[i].pixel]) value[i] = pending[i].gather.weight * integrator.gatherDeferred(pending[i].gather);
+    if (progress) progress->advance(1);
+  });
+  if (cancelled) throw CancelledError();
+  if (progress) progress->finish();
+  std::vector<DVec3> sum(ib.indirect.size(), DVec3(0.0));
+  for (size_t i = 0; i < pending.size(); ++i) {
+    if (!gathers[pending[i].pixel]) continue;
+    if (usableRadiance(value[i])) sum[pending[i].pixel] += DVec3(value[i]);
+    else ++invalid;
+  }
+  for (size_t p = 0; p < sum.size(); ++p)
+    if (gathers[p]) ib.indirect[p] += Vec3(sum[p] / double(spp));
+}
 }  // namespace
 
 void Integrator::linkIndirect(IndirectBuffer& buffer) const { buffer.link.assign(buffer.indirect.size(), 0u); }
@@ -47,6 +97,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   }
   // World-space width of a pixel per unit distance from the camera.
   const float pixelAngle = 2.0f * std::tan(0.5f * scene.camera.fovYDeg() * kPi / 180.0f) / float(h);
+  std::vector<std::vector<PendingGather>> tilePending(size_t(tilesX) * size_t(tilesY));
   std::atomic<uint64_t> invalid{0};
   std::atomic<bool> cancelled{false};
   if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
@@ -84,7 +135,8 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
             oneSurface = false;
             continue;
           }
-          indirectSum += DVec3(sp.indirect);
+          if (sp.deferred) tilePending[size_t(tile)].push_back({pixel, sp.gather});
+          else indirectSum += DVec3(sp.indirect);
           positionSum += DVec3(sp.position);
           if (seen++ == 0) first = sp;
           else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kSameSurfaceCos) oneSurface = false;
@@ -106,12 +158,33 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     if (progress) progress->advance(1);
   });
   if (cancelled) throw CancelledError();
+  if (progress) progress->finish();
   if (split) {
+    // Which pixels run their deferred gathers: one per block on the filter's surfaces, every
+    // pixel off them (the filter keeps those as they are), and any the filter cannot fill.
+    const int spacing = std::max(1, integrator.gatherSpacing());
+    std::vector<uint8_t> gathers(size_t(w) * size_t(h), 1u);
+    ib.estimated.assign(gathers.size(), 1u);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const size_t p = size_t(y) * size_t(w) + size_t(x);
+        if (ib.filterable[p] && !gathersInBlock(x, y, spacing, settings.seed)) gathers[p] = ib.estimated[p] = 0u;
+      }
     integrator.linkIndirect(ib);
+    if (spacing > 1) {
+      const std::vector<uint8_t> unfilled = unfilledPixels(ib, filterRadius);
+      for (size_t p = 0; p < unfilled.size(); ++p)
+        if (unfilled[p]) gathers[p] = ib.estimated[p] = 1u;
+    }
+    std::vector<PendingGather> pending;
+    for (const std::vector<PendingGather>& t : tilePending) pending.insert(pending.end(), t.begin(), t.end());
+    tilePending = {};
+    uint64_t bad = 0;
+    runGathers(integrator, pending, gathers, settings.spp, ib, bad, progress);
+    invalid += bad;
     const std::vector<Vec3> indirect = filterIndirect(ib, filterRadius);
     for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
   }
-  if (progress) progress->finish();
   result.seconds = timer.seconds();
   result.samples = static_cast<uint64_t>(w) * h * settings.spp;
   result.invalidSamples = invalid;

@@ -36,6 +36,7 @@ constexpr float kOpaque = 0.99f;
 constexpr int kDefaultLevel = 6;
 constexpr int kDefaultGathers = 2;
 constexpr int kDefaultFilterRadius = 3;
+constexpr int kDefaultGatherSpacing = 1;
 /// Names of VoxelConeIntegrator::View, in order.
 const std::vector<std::string> kViewNames = {"full", "direct", "indirect", "caustic", "field"};
 }  // namespace
@@ -73,7 +74,10 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   m_maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
   m_lightSamples = r.integer("light_samples", 1, 1, 1024);
   m_gathers = r.integer("gathers", kDefaultGathers, 0, 1 << 24);
-  m_filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 16);
+  m_filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 64);
+  m_gatherSpacing = r.integer("gather_spacing", kDefaultGatherSpacing, 1, 16);
+  if (m_gatherSpacing > 1 && m_filterRadius == 0)
+    throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
   m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
   m_hitGather = r.choice("gather", {"march", "hit"}) == "hit";
   const std::string view = r.choice("view", kViewNames);
@@ -97,6 +101,7 @@ nlohmann::json VoxelConeIntegrator::settingsJson() const {
           {"light_samples", m_lightSamples},
           {"gathers", m_gathers},
           {"filter", m_filterRadius},
+          {"gather_spacing", m_gatherSpacing},
           {"exact_segment", m_exactSegment},
           {"gather", m_hitGather ? "hit" : "march"},
           {"view", kViewNames[size_t(m_view)]}};
@@ -229,6 +234,29 @@ Vec3 VoxelConeIntegrator::traceCone(const Vec3& p, const Vec3& pError, const Vec
   return C;
 }
 
+Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const {
+  const Material& mat = m_scene.materials[sh.material];
+  const Vec3 ng = glm::dot(sh.geomNormal, woWorld) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
+  const Frame frame(sh.shadingNormal);
+  const Vec3 wo = frame.toLocal(woWorld);
+  // The cone set turned by the angle 2 pi u about the normal; each cone weighted by
+  // f(wo, axis) * pi * w_i, which is albedo * w_i for a Lambertian surface.
+  const float rotation = 2.0f * kPi * u;
+  const float cr = std::cos(rotation), sr = std::sin(rotation);
+  const Frame geo(ng);
+  Vec3 indirect(0.0f);
+  for (const Cone& cone : m_cones.cones()) {
+    const Vec3 d =
+        geo.toWorld(Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
+    const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
+    if (isBlack(f)) continue;
+    indirect += cone.weight * f * traceCone(sh.position, sh.positionError, ng, d, m_tanHalf);
+  }
+  return indirect;
+}
+
+Vec3 VoxelConeIntegrator::gatherDeferred(const DeferredGather& g) const { return gatherDiffuse(g.hit, g.wo, g.u); }
+
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler,
                                  IndirectSplit* split) const {
   const Material& mat = m_scene.materials[sh.material];
@@ -261,24 +289,14 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
       split->material = sh.material;
     }
     if (gatherWeight == 0.0f) return L;
-    // The cone set turned by a random angle about the normal; each cone weighted by
-    // f(wo, axis) * pi * w_i, which is albedo * w_i for a Lambertian surface.
-    const float rotation = 2.0f * kPi * sampler.uniform();
-    const float cr = std::cos(rotation), sr = std::sin(rotation);
-    const Frame geo(ng);
-    Vec3 indirect(0.0f);
-    for (const Cone& cone : m_cones.cones()) {
-      const Vec3 d = geo.toWorld(
-          Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
-      const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
-      if (isBlack(f)) continue;
-      indirect += (gatherWeight * cone.weight) * f * traceCone(sh.position, sh.positionError, ng, d, m_tanHalf);
-    }
+    const float u = sampler.uniform();
+    // With the filter the cones wait until renderImage knows whether this pixel needs them.
     if (split) {
-      split->indirect = indirect;
+      split->deferred = true;
+      split->gather = {sh, woWorld, u, gatherWeight};
       return L;
     }
-    return L + indirect;
+    return L + gatherWeight * gatherDiffuse(sh, woWorld, u);
   }
   if (m_view == View::Caustic || gatherWeight == 0.0f) return L;
   // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.

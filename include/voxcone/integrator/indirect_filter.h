@@ -28,6 +28,9 @@ struct IndirectBuffer {
   std::vector<uint32_t> material;
   std::vector<float> footprint;    ///< world-space width of the pixel at its hit (> 0)
   std::vector<uint8_t> filterable; ///< every sample saw this one surface (else kept as is)
+  /// Whether the pixel holds an estimate of its own (1) or only takes its neighbours' (0: its
+  /// `indirect` is not read). Empty: every pixel has one.
+  std::vector<uint8_t> estimated;
   /// Bit 0: the pixel and its right neighbour see each other's points; bit 1: the same for the
   /// one below. Empty: every pair of adjacent pixels is linked.
   std::vector<uint8_t> link;
@@ -38,10 +41,14 @@ struct IndirectBuffer {
 bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q);
 
 /// The filtered indirect light of every pixel: filterable pixels take the weighted mean of the
-/// filterable pixels within `radius` (pixels) that pass the surface tests and are reachable
-/// through links inside the window, with Gaussian
-/// weights of standard deviation radius / 2 in the image times the cosine of the normals to the
-/// eighth power; the others keep their own value. Deterministic (no order dependence).
+/// estimated filterable pixels within `radius` (pixels) that pass the surface tests and are
+/// reachable through links inside the window, with Gaussian weights of standard deviation
+/// radius / 2 in the image times the cosine of the normals to the eighth power; the others, and
+/// any that reach no estimated pixel, keep their own value. Deterministic (no order dependence).
 std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius);
+
+/// The filterable pixels that filterIndirect cannot fill: no estimated pixel (themselves
+/// included) is among their reachable neighbours within `radius`. 1 marks one.
+std::vector<uint8_t> unfilledPixels(const IndirectBuffer& in, int radius);
 
 }  // namespace voxcone

@@ -20,6 +20,15 @@ namespace voxcone {
 class Accel;
 struct IndirectBuffer;
 
+/// An indirect-light estimate at a sample's first hit that liSplit leaves for later
+/// (Integrator::gatherDeferred): renderImage runs it only at the pixels that need it.
+struct DeferredGather {
+  SurfaceHit hit;        ///< the first hit
+  Vec3 wo{0.0f};         ///< unit, towards the viewer, world space
+  float u = 0.0f;        ///< the sample's random number for the estimate (voxcone: the cones' turn)
+  float weight = 0.0f;   ///< the estimate's weight in the sample (voxcone: spp / gathers, or 1)
+};
+
 /// What one sample's first surface hands to the screen-space filter of indirect light
 /// (Integrator::liSplit, renderImage).
 struct IndirectSplit {
@@ -28,6 +37,10 @@ struct IndirectSplit {
   Vec3 normal{0.0f};     ///< its unit geometric normal on the viewer's side
   uint32_t material = 0;
   bool valid = false;    ///< the first hit is a surface whose indirect light is filterable
+  /// The sample's filterable indirect light is `gather`'s estimate (gatherDeferred) rather
+  /// than `indirect`.
+  bool deferred = false;
+  DeferredGather gather;
 };
 
 /// Estimates the radiance arriving along camera rays. Implementations are immutable while
@@ -48,6 +61,12 @@ public:
   /// li, except that the indirect light of a filterable first hit goes into `split` (with the
   /// hit's position, normal and material) instead of the return value.
   virtual Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const { return li(ray, sampler); }
+  /// The weighted indirect-light estimate of a gather liSplit deferred (split.deferred).
+  virtual Vec3 gatherDeferred(const DeferredGather& gather) const { return Vec3(0.0f); }
+  /// Spacing in pixels of the pixels whose deferred gathers renderImage runs: one pixel in each
+  /// spacing x spacing block, plus every pixel the filter cannot fill from its neighbours
+  /// (1: every pixel).
+  virtual int gatherSpacing() const { return 1; }
   /// Fill buffer.link (indirect_filter.h) before the filter runs: which adjacent pixels' points
   /// see each other. The default links none, so the filter keeps every pixel's own value.
   virtual void linkIndirect(IndirectBuffer& buffer) const;
@@ -89,8 +108,12 @@ struct RenderResult {
 /// its first slot the jitter, so the image is bit-identical at any thread count.
 /// Box pixel filter: each sample is uniform in the pixel's square. With an indirect filter
 /// radius, each pixel's indirect light (liSplit) is replaced by its neighbours' weighted mean
-/// where all its samples saw one surface (filterIndirect, deterministic). Throws CancelledError
-/// when `progress` reports cancellation.
+/// where all its samples saw one surface (filterIndirect, deterministic). Deferred gathers
+/// (IndirectSplit::deferred) run after every pixel's samples, at one pixel per
+/// gatherSpacing() block (chosen per block from the seed), at every pixel the filter does not
+/// take (edges, several surfaces) and at every pixel with no such gathering pixel among its
+/// filter neighbours; the filter then fills the others from their neighbours. Throws
+/// CancelledError when `progress` reports cancellation.
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                          Progress* progress = nullptr);
 

@@ -98,6 +98,8 @@ public:
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
   int indirectFilterRadius() const override { return m_filterRadius; }
   Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
+  Vec3 gatherDeferred(const DeferredGather& gather) const override;
+  int gatherSpacing() const override { return m_gatherSpacing; }
   /// Adjacent pixels on one surface are linked when an exact ray between their points, a
   /// quarter of a footprint above the surface, meets nothing.
   void linkIndirect(IndirectBuffer& buffer) const override;
@@ -112,6 +114,8 @@ private:
   Vec3 traceCone(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
   /// hit goes there instead (with the hit's position, normal and material).
+  /// The cones' indirect light at a diffuse hit seen from woWorld, the cone set turned by 2 pi u.
+  Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const;
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
   /// li, with the first hit's indirect light in `split` when it is given.
   Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
@@ -136,6 +140,7 @@ private:
   int m_lightSamples = 1;
   int m_gathers = 0;            ///< pixel samples that gather indirect light (0: all)
   int m_filterRadius = 0;       ///< screen-space indirect filter radius, pixels (0: off)
+  int m_gatherSpacing = 1;      ///< one gathering pixel per spacing x spacing block (renderImage)
   float m_exactSegment = 0.0f;  ///< finest voxels
   bool m_hitGather = false;     ///< gather = "hit": one exact ray per cone, field filtered at the hit
   enum class View { Full, Direct, Indirect, Caustic, Field } m_view = View::Full;
