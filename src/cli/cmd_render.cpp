@@ -137,11 +137,13 @@ void runRender(const RenderOptions& o) {
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
   meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"pilot_seconds", pilotSec},
-                     {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds}};
+                     {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds},
+                     {"render_stage_seconds", result.stageSeconds}};
   if (autoSettings) meta["auto"] = autoReport;
   meta["stats"] = {{"scene", scene.statsJson()}, {"accel", accel->statsJson()},
                    {"integrator", integrator->statsJson()},
-                   {"samples", result.samples}, {"invalid_samples", result.invalidSamples}};
+                   {"samples", result.samples}, {"invalid_samples", result.invalidSamples},
+                   {"indirect_filter", result.filterStats}};
 
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
   writeExr(exrPath, result.image, meta);

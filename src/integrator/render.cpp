@@ -159,7 +159,9 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   });
   if (cancelled) throw CancelledError();
   if (progress) progress->finish();
+  result.stageSeconds["samples"] = timer.seconds();
   if (split) {
+    Timer stage;
     // Which pixels run their deferred gathers: one per block on the filter's surfaces, every
     // pixel off them (the filter keeps those as they are), and any the filter cannot fill.
     const int spacing = std::max(1, integrator.gatherSpacing());
@@ -171,19 +173,36 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
         if (ib.filterable[p] && !gathersInBlock(x, y, spacing, settings.seed)) gathers[p] = ib.estimated[p] = 0u;
       }
     integrator.linkIndirect(ib);
+    uint64_t unfilledCount = 0;
     if (spacing > 1) {
       const std::vector<uint8_t> unfilled = unfilledPixels(ib, filterRadius);
       for (size_t p = 0; p < unfilled.size(); ++p)
-        if (unfilled[p]) gathers[p] = ib.estimated[p] = 1u;
+        if (unfilled[p]) {
+          gathers[p] = ib.estimated[p] = 1u;
+          ++unfilledCount;
+        }
     }
+    result.stageSeconds["link"] = stage.seconds();
+    stage.reset();
     std::vector<PendingGather> pending;
     for (const std::vector<PendingGather>& t : tilePending) pending.insert(pending.end(), t.begin(), t.end());
     tilePending = {};
+    uint64_t filterable = 0, gathering = 0, gathersRun = 0;
+    for (size_t p = 0; p < gathers.size(); ++p) {
+      filterable += ib.filterable[p];
+      gathering += gathers[p];
+    }
+    for (const PendingGather& g : pending) gathersRun += gathers[g.pixel];
+    result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", unfilledCount},
+                          {"gathers", gathersRun}};
     uint64_t bad = 0;
     runGathers(integrator, pending, gathers, settings.spp, ib, bad, progress);
     invalid += bad;
+    result.stageSeconds["gather"] = stage.seconds();
+    stage.reset();
     const std::vector<Vec3> indirect = filterIndirect(ib, filterRadius);
     for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
+    result.stageSeconds["filter"] = stage.seconds();
   }
   result.seconds = timer.seconds();
   result.samples = static_cast<uint64_t>(w) * h * settings.spp;

@@ -113,6 +113,43 @@ TEST(IndirectFilter, LightDoesNotCrossACutLink) {
   EXPECT_EQ(out[size_t(5) * 8 + 7].x, 0.0f);
 }
 
+TEST(IndirectFilter, PixelsWithoutEstimatesTakeTheirNeighboursOnly) {
+  // A row of five on one plane, radius 2 (sigma 1), only pixels 0 and 3 estimated (1 and 7):
+  // pixel 1 takes (e^-0.5 * 1 + e^-2 * 7) / (e^-0.5 + e^-2), pixel 4 the 7 of its neighbour
+  // alone, pixel 0 (its own 1 and pixel 3 beyond the window) keeps 1. Values of pixels
+  // without an estimate are never read.
+  IndirectBuffer b = planeBuffer(5, 1, Vec3(0.0f));
+  b.indirect = {Vec3(1.0f), Vec3(100.0f), Vec3(100.0f), Vec3(7.0f), Vec3(100.0f)};
+  b.estimated = {1, 0, 0, 1, 0};
+  const float g1 = std::exp(-0.5f), g2 = std::exp(-2.0f);
+  const std::vector<Vec3> out = filterIndirect(b, 2);
+  EXPECT_NEAR(out[1].x, (g1 * 1.0f + g2 * 7.0f) / (g1 + g2), 1e-5f);
+  EXPECT_NEAR(out[2].x, (g2 * 1.0f + g1 * 7.0f) / (g1 + g2), 1e-5f);
+  EXPECT_NEAR(out[4].x, 7.0f, 1e-6f);
+  EXPECT_NEAR(out[0].x, 1.0f, 1e-6f);
+  EXPECT_EQ(unfilledPixels(b, 2), std::vector<uint8_t>(5, 0u));
+  // A cut link between 2 and 3: pixel 4 still has 3, pixel 2 only 0 (at 2); radius 1: pixel 2
+  // reaches nothing estimated and is unfilled, as is none other.
+  b.link.assign(5, 1u);
+  b.link[2] = 0u;
+  EXPECT_NEAR(filterIndirect(b, 2)[2].x, 1.0f, 1e-6f);
+  EXPECT_EQ(unfilledPixels(b, 1), (std::vector<uint8_t>{0, 0, 1, 0, 0}));
+  // An unfilterable pixel is never unfilled (renderImage gathers it anyway).
+  b.filterable[2] = 0u;
+  EXPECT_EQ(unfilledPixels(b, 1), std::vector<uint8_t>(5, 0u));
+}
+
+TEST(IndirectFilter, ColumnsCarryTheRowsSums) {
+  // 1 x 3 column, the middle one estimated only: the top and bottom take its value; a 3 x 3
+  // plane with only the centre estimated: every pixel takes it (rows, then columns).
+  IndirectBuffer b = planeBuffer(3, 3, Vec3(0.0f));
+  b.indirect[4] = Vec3(2.5f);
+  b.estimated.assign(9, 0u);
+  b.estimated[4] = 1u;
+  for (const Vec3& v : filterIndirect(b, 2)) EXPECT_NEAR(v.x, 2.5f, 1e-6f);
+  EXPECT_EQ(unfilledPixels(b, 1), std::vector<uint8_t>(9, 0u));
+}
+
 TEST(IndirectFilter, NoiseOnOneSurfaceFallsByTheKernelsSampleCount) {
   // Independent noise of variance s^2 on one plane: radius 3 (sigma 1.5) keeps the mean and
   // divides the variance by sum(w)^2 / sum(w^2) = 4 pi sigma^2 = 28 in the interior (measured

@@ -199,6 +199,23 @@ TEST(VoxelCone, TheIndirectFilterKeepsTheMeanInEveryRegion) {
   expectHalvesAgree(48, 8, {{"level", 5}, {"photons", 20000}, {"gathers", 2}, {"filter", 0}}, {{"filter", 3}}, 0.02);
 }
 
+TEST(VoxelCone, GatheringOnePixelPerBlockKeepsTheMeanInEveryRegion) {
+  // gather_spacing 3 (one gathering pixel per 3x3 block, the filter fills the rest) against
+  // every pixel gathering, both with the filter of radius 6: the halves' means within 3% (a
+  // non-gathering pixel counted as black would lose 8/9 of the indirect light).
+  expectHalvesAgree(48, 4, {{"level", 5}, {"photons", 20000}, {"filter", 6}}, {{"gather_spacing", 3}}, 0.03);
+}
+
+TEST(VoxelCone, SameImageAtOneAndTwoThreadsWithOneGatherPerBlock) {
+  const Scene scene = cornellBox();
+  RenderSettings s = scene.render;
+  s.width = s.height = 40;
+  s.spp = 2;
+  EXPECT_EQ(test::pixelsDifferingAcrossThreads(scene, "voxcone", s,
+                                               {{"photons", 20000}, {"level", 5}, {"gather_spacing", 4}, {"filter", 8}}),
+            0u);
+}
+
 TEST(VoxelCone, SameImageAtOneAndTwoThreads) {
   const Scene scene = cornellBox();
   RenderSettings s = scene.render;
@@ -211,7 +228,8 @@ TEST(VoxelCone, BadOptionsAreSettingsErrors) {
   const Scene scene = test::furnaceScene(0.5f, 1.0f, 0.0f, 2, 1);
   const Hbvh accel(scene);
   for (const char* bad : {R"({"cones": 0})", R"({"level": 13})", R"({"view": "nope"})", R"({"unknown": 1})",
-                          R"({"cone_angle": -1})", R"({"coarsest_level": 9, "level": 8})"}) {
+                          R"({"cone_angle": -1})", R"({"coarsest_level": 9, "level": 8})",
+                          R"({"gather_spacing": 2, "filter": 0})", R"({"gather_spacing": 0})"}) {
     IntegratorContext ctx{scene, accel, scene.render, nlohmann::json::parse(bad)};
     EXPECT_THROW(createIntegrator("voxcone", ctx), SettingsError) << bad;
   }

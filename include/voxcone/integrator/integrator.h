@@ -101,6 +101,13 @@ struct RenderResult {
   double seconds = 0.0;       ///< wall time of the pixel loop
   uint64_t samples = 0;       ///< camera samples taken
   uint64_t invalidSamples = 0;///< NaN/inf estimates dropped (should be 0)
+  /// Seconds per stage of the pixel loop: "samples" (every pixel's samples), and with the
+  /// indirect filter "link", "gather" (the deferred gathers) and "filter".
+  nlohmann::json stageSeconds = nlohmann::json::object();
+  /// With the indirect filter: pixels the filter takes ("filterable"), pixels that ran their
+  /// deferred gathers ("gathering"; "unfilled": those only because no neighbour gathers), and
+  /// the gathers run ("gathers").
+  nlohmann::json filterStats = nlohmann::json::object();
 };
 
 /// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its samples from
