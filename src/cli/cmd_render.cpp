@@ -146,8 +146,10 @@ void runRender(const RenderOptions& o) {
                    {"indirect_filter", result.filterStats}};
 
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
+  t.reset();
   writeExr(exrPath, result.image, meta);
   writePng(pngPath, result.image);
+  meta["timings"]["write_seconds"] = t.seconds();
   meta["timings"]["total_seconds"] = total.seconds();
   meta["peak_rss_bytes"] = peakRssBytes();
   meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};

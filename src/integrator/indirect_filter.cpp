@@ -17,10 +17,13 @@ constexpr float kMinNormalCos = 0.9f;
 constexpr float kPlaneFootprints = 2.0f;
 }  // namespace
 
+bool onFilterSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material) {
+  return in.filterable[p] && material == in.material[p] && glm::dot(in.normal[p], normal) >= kMinNormalCos &&
+         std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p];
+}
+
 bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q) {
-  return in.filterable[p] && in.filterable[q] && in.material[q] == in.material[p] &&
-         glm::dot(in.normal[p], in.normal[q]) >= kMinNormalCos &&
-         std::fabs(glm::dot(in.normal[p], in.position[q] - in.position[p])) <= kPlaneFootprints * in.footprint[p];
+  return in.filterable[q] && onFilterSurface(in, p, in.position[q], in.normal[q], in.material[q]);
 }
 
 namespace {

@@ -27,6 +27,48 @@ struct PendingGather {
   DeferredGather gather;
 };
 
+/// A sample of a pixel the filter does not take (an edge, a crease, several surfaces), at its
+/// first hit's filterable surface.
+struct EdgeSample {
+  size_t pixel = 0;
+  Vec3 position{0.0f}, normal{0.0f};
+  uint32_t material = 0;
+};
+
+/// Filter pixels an edge sample may take its indirect light from: within this many pixels.
+constexpr int kBorrowRadius = 2;
+
+/// For each edge sample, the nearest filterable pixel within kBorrowRadius on its surface
+/// (onFilterSurface) whose point it sees along the surface (Integrator::linkedPoints), or -1.
+/// Offsets are tried by distance, then row, then column: deterministic.
+std::vector<int64_t> borrowFrom(const Integrator& integrator, const IndirectBuffer& ib,
+                                const std::vector<EdgeSample>& edges) {
+  std::vector<std::pair<int, int>> offsets;
+  for (int dy = -kBorrowRadius; dy <= kBorrowRadius; ++dy)
+    for (int dx = -kBorrowRadius; dx <= kBorrowRadius; ++dx)
+      if (dx != 0 || dy != 0) offsets.emplace_back(dx, dy);
+  std::stable_sort(offsets.begin(), offsets.end(), [](const auto& a, const auto& b) {
+    return a.first * a.first + a.second * a.second < b.first * b.first + b.second * b.second;
+  });
+  std::vector<int64_t> from(edges.size(), -1);
+  tbb::parallel_for(size_t(0), edges.size(), [&](size_t i) {
+    const EdgeSample& e = edges[i];
+    const int x = int(e.pixel % size_t(ib.width)), y = int(e.pixel / size_t(ib.width));
+    for (const auto& [dx, dy] : offsets) {
+      const int qx = x + dx, qy = y + dy;
+      if (qx < 0 || qy < 0 || qx >= ib.width || qy >= ib.height) continue;
+      const size_t q = size_t(qy) * size_t(ib.width) + size_t(qx);
+      if (!onFilterSurface(ib, q, e.position, e.normal, e.material)) continue;
+      // Both ends a quarter of q's footprint above the surface (as linkIndirect's links).
+      const float lift = 0.25f * ib.footprint[q];
+      if (!integrator.linkedPoints(e.position + e.normal * lift, ib.position[q] + ib.normal[q] * lift)) continue;
+      from[i] = int64_t(q);
+      return;
+    }
+  });
+  return from;
+}
+
 /// Whether pixel (x, y) is its spacing x spacing block's gathering pixel: one per block, at an
 /// offset drawn per block from the seed (a regular lattice would alias with the scene's edges).
 bool gathersInBlock(int x, int y, int spacing, uint64_t seed) {
@@ -98,6 +140,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   // World-space width of a pixel per unit distance from the camera.
   const float pixelAngle = 2.0f * std::tan(0.5f * scene.camera.fovYDeg() * kPi / 180.0f) / float(h);
   std::vector<std::vector<PendingGather>> tilePending(size_t(tilesX) * size_t(tilesY));
+  std::vector<std::vector<EdgeSample>> tileEdges(tilePending.size());
   std::atomic<uint64_t> invalid{0};
   std::atomic<bool> cancelled{false};
   if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
@@ -110,6 +153,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     }
     const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
     uint64_t bad = 0;
+    std::vector<EdgeSample> pixelSamples;
     for (int y = y0; y < std::min(y0 + kTile, h); ++y)
       for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
         const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
@@ -119,6 +163,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
         int seen = 0;  // samples whose first hit split off its indirect light
         bool oneSurface = true;
         IndirectSplit first;
+        pixelSamples.clear();
         for (int s = 0; s < settings.spp; ++s) {
           sampler.startSample(static_cast<uint32_t>(s));
           const Vec2 jitter = sampler.uniform2();
@@ -138,6 +183,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           if (sp.deferred) tilePending[size_t(tile)].push_back({pixel, sp.gather});
           else indirectSum += DVec3(sp.indirect);
           positionSum += DVec3(sp.position);
+          pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material});
           if (seen++ == 0) first = sp;
           else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kSameSurfaceCos) oneSurface = false;
         }
@@ -152,6 +198,8 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           ib.material[pixel] = first.material;
           ib.footprint[pixel] = std::max(1e-30f, pixelAngle * glm::length(ib.position[pixel] - scene.camera.position()));
           ib.filterable[pixel] = 1u;
+        } else if (seen > 0) {
+          tileEdges[size_t(tile)].insert(tileEdges[size_t(tile)].end(), pixelSamples.begin(), pixelSamples.end());
         }
       }
     invalid += bad;
@@ -182,6 +230,23 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           ++unfilledCount;
         }
     }
+    // Pixels the filter does not take: where each of their samples on a filterable surface
+    // finds a filter pixel of that surface nearby, the sample takes that pixel's filtered light
+    // and the pixel gathers nothing; any sample without one and the pixel gathers as before.
+    std::vector<EdgeSample> edges;
+    for (const std::vector<EdgeSample>& t : tileEdges) edges.insert(edges.end(), t.begin(), t.end());
+    tileEdges = {};
+    const std::vector<int64_t> from = borrowFrom(integrator, ib, edges);
+    std::vector<uint8_t> borrows(gathers.size(), 0u);
+    for (size_t i = 0; i < edges.size(); ++i) borrows[edges[i].pixel] = 1u;
+    for (size_t i = 0; i < edges.size(); ++i)
+      if (from[i] < 0) borrows[edges[i].pixel] = 0u;
+    uint64_t borrowing = 0;
+    for (size_t p = 0; p < gathers.size(); ++p)
+      if (borrows[p]) {
+        gathers[p] = 0u;
+        ++borrowing;
+      }
     result.stageSeconds["link"] = stage.seconds();
     stage.reset();
     std::vector<PendingGather> pending;
@@ -194,13 +259,19 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     }
     for (const PendingGather& g : pending) gathersRun += gathers[g.pixel];
     result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", unfilledCount},
-                          {"gathers", gathersRun}};
+                          {"borrowing", borrowing}, {"gathers", gathersRun}};
     uint64_t bad = 0;
     runGathers(integrator, pending, gathers, settings.spp, ib, bad, progress);
     invalid += bad;
     result.stageSeconds["gather"] = stage.seconds();
     stage.reset();
-    const std::vector<Vec3> indirect = filterIndirect(ib, filterRadius);
+    std::vector<Vec3> indirect = filterIndirect(ib, filterRadius);
+    // The borrowing pixels: each sample's share of its filter pixel's light, in sample order.
+    std::vector<DVec3> borrowed(indirect.size(), DVec3(0.0));
+    for (size_t i = 0; i < edges.size(); ++i)
+      if (borrows[edges[i].pixel]) borrowed[edges[i].pixel] += DVec3(indirect[size_t(from[i])]);
+    for (size_t p = 0; p < indirect.size(); ++p)
+      if (borrows[p]) indirect[p] = Vec3(borrowed[p] / double(settings.spp));
     for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
     result.stageSeconds["filter"] = stage.seconds();
   }

@@ -339,14 +339,18 @@ void VoxelConeIntegrator::linkIndirect(IndirectBuffer& b) const {
         // the two points (a wall seen edge-on) cuts the link, the surface itself cannot.
         const Vec3 from = b.position[p] + b.normal[p] * (0.25f * b.footprint[p]);
         const Vec3 to = b.position[q[bit]] + b.normal[q[bit]] * (0.25f * b.footprint[p]);
-        Ray r;
-        r.origin = from;
-        r.dir = to - from;
-        r.tMax = 1.0f;
-        if (!m_accel.occluded(r)) b.link[p] |= uint8_t(1u << bit);
+        if (linkedPoints(from, to)) b.link[p] |= uint8_t(1u << bit);
       }
     }
   });
+}
+
+bool VoxelConeIntegrator::linkedPoints(const Vec3& from, const Vec3& to) const {
+  Ray r;
+  r.origin = from;
+  r.dir = to - from;
+  r.tMax = 1.0f;
+  return !m_accel.occluded(r);
 }
 
 Vec3 VoxelConeIntegrator::liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const {

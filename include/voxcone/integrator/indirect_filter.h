@@ -39,6 +39,9 @@ struct IndirectBuffer {
 /// Whether adjacent pixels p and q (filterable) see one surface by the filter's tests: the same
 /// material, normals within 25 degrees, q within two of p's footprints of p's tangent plane.
 bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q);
+/// Whether a point (position, unit normal, material) lies on filterable pixel p's surface by
+/// the same tests.
+bool onFilterSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material);
 
 /// The filtered indirect light of every pixel: filterable pixels take the weighted mean of the
 /// estimated filterable pixels within `radius` (pixels) that pass the surface tests and are

@@ -70,6 +70,10 @@ public:
   /// Fill buffer.link (indirect_filter.h) before the filter runs: which adjacent pixels' points
   /// see each other. The default links none, so the filter keeps every pixel's own value.
   virtual void linkIndirect(IndirectBuffer& buffer) const;
+  /// Whether nothing lies on the segment from `from` to `to` (two points just above one
+  /// surface): the test behind linkIndirect's links, also used for the samples of pixels the
+  /// filter does not take. The default knows of no links.
+  virtual bool linkedPoints(const Vec3& from, const Vec3& to) const { return false; }
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
   /// Statistics gathered in prepare/li, as JSON.

@@ -103,6 +103,7 @@ public:
   /// Adjacent pixels on one surface are linked when an exact ray between their points, a
   /// quarter of a footprint above the surface, meets nothing.
   void linkIndirect(IndirectBuffer& buffer) const override;
+  bool linkedPoints(const Vec3& from, const Vec3& to) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
