@@ -133,7 +133,7 @@ void VoxelConeIntegrator::prepare(Progress* progress) {
   m_stats = maps.stats.toJson();
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
   Timer t;
-  VoxelField field = VoxelField::voxelize(m_scene, m_voxelSettings, progress);
+  VoxelField field = VoxelField::voxelize(m_scene, m_voxelSettings, progress, &maps.caustic);
   m_stats["voxelize_seconds"] = t.seconds();
   t.reset();
   field.inject(maps, progress);

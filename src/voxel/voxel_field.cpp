@@ -662,7 +662,8 @@ VoxelField::~VoxelField() = default;
 VoxelField::VoxelField(VoxelField&&) noexcept = default;
 VoxelField& VoxelField::operator=(VoxelField&&) noexcept = default;
 
-VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress) {
+VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress,
+                                const std::vector<Photon>* causticPhotons) {
   if (settings.level < 1 || settings.level > 13)
     throw SettingsError("voxel level must be in [1, 13], got " + std::to_string(settings.level));
   if (settings.coarsestLevel < 0 || settings.coarsestLevel > settings.level)
@@ -686,10 +687,10 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
   if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
   f.bounds = Bounds3(sb.lo, Vec3(f.origin + DVec3(f.extent)));
 
-  auto build = [&](Grid& grid, int level, bool countArea) {
+  auto build = [&](Grid& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
     Timer timer;
     const double vs = f.voxelSize(level);
-    VoxelArrays a = voxel::voxelizeTriangles(scene, f.origin, vs, uint32_t(1) << level, progress);
+    VoxelArrays a = voxel::voxelizeTriangles(scene, f.origin, vs, uint32_t(1) << level, progress, onlyBricks);
     if (countArea) {
       double area = 0.0;
       for (float c : a.coverage) area += double(c);
@@ -698,8 +699,35 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
     grid.levels.push_back(makeLevel(level, vs, a));
     grid.levels.back().buildSeconds = timer.seconds();
   };
-  build(f.main, settings.level, true);
-  if (settings.causticLevel > 0) build(f.caustic, settings.causticLevel, false);
+  build(f.main, settings.level, true, nullptr);
+  if (settings.causticLevel > 0) {
+    if (!causticPhotons) {
+      build(f.caustic, settings.causticLevel, false, nullptr);
+      return field;
+    }
+    // The bricks the photons' footprints reach (splatPhotons' voxel box around each, which
+    // holds the nearest-voxel fallback too): the caustic grid keeps only voxels a caustic
+    // photon lit, so voxelizing the rest of the scene at the caustic level (0.2 s on the
+    // dragon at level 7, for 600 stored photons) changes nothing.
+    const double vs = f.voxelSize(settings.causticLevel);
+    const double radius = 3.0 * double(settings.kernelSigmaVoxels);
+    const int64_t maxIndex = (int64_t(1) << settings.causticLevel) - 1;
+    std::vector<uint64_t> bricks;
+    for (const Photon& ph : *causticPhotons) {
+      const DVec3 q = (DVec3(ph.position) - f.origin) / vs;
+      int64_t lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::clamp(int64_t(std::floor(q[a] - 0.5 - radius)), int64_t(0), maxIndex) >> voxel::kBrickLog2;
+        hi[a] = std::clamp(int64_t(std::floor(q[a] + 0.5 + radius)), int64_t(0), maxIndex) >> voxel::kBrickLog2;
+      }
+      for (int64_t bi = lo[0]; bi <= hi[0]; ++bi)
+        for (int64_t bj = lo[1]; bj <= hi[1]; ++bj)
+          for (int64_t bk = lo[2]; bk <= hi[2]; ++bk) bricks.push_back(voxel::packBrick(uint32_t(bi), uint32_t(bj), uint32_t(bk)));
+    }
+    std::sort(bricks.begin(), bricks.end());
+    bricks.erase(std::unique(bricks.begin(), bricks.end()), bricks.end());
+    build(f.caustic, settings.causticLevel, false, &bricks);
+  }
   return field;
 }
 

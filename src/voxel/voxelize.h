@@ -64,9 +64,11 @@ struct VoxelArrays {
 };
 
 /// Voxelize every triangle of `scene` into a grid of `resolution`^3 voxels of `voxelSize`
-/// (world units) whose lower corner is `origin`. Deterministic at any thread count.
+/// (world units) whose lower corner is `origin`. With `onlyBricks` (sorted packBrick keys),
+/// only the voxels of those bricks (and only the triangles that reach one). Deterministic at
+/// any thread count.
 VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,
-                              Progress* progress);
+                              Progress* progress, const std::vector<uint64_t>* onlyBricks = nullptr);
 
 /// Akenine-Möller (2001) triangle/box overlap by the separating axis theorem; the box is
 /// centred at `center` with half size `halfSize` on every axis.

@@ -431,6 +431,20 @@ TEST(VoxelField, CausticGrid) {
     if (s.grid == "caustic") {
       EXPECT_NEAR(double(s.activeVoxels), 128.0 * 64.0, 128.0 * 3.0);
     }
+
+  // Voxelized only where the photons' footprints reach (as the voxcone integrator does), the
+  // caustic grid is the same: the same voxels, the same radiance to the bit.
+  VoxelField field3 = VoxelField::voxelize(scene, settings, nullptr, &half.caustic);
+  field3.inject(half);
+  uint64_t voxels2 = 0, voxels3 = 0;
+  for (const VoxelGridStats& s : field2.stats()) voxels2 += s.grid == "caustic" ? s.activeVoxels : 0;
+  for (const VoxelGridStats& s : field3.stats()) voxels3 += s.grid == "caustic" ? s.activeVoxels : 0;
+  EXPECT_EQ(voxels3, voxels2);
+  for (int a = 0; a < 20; ++a)
+    for (int b = 0; b < 20; ++b) {
+      const Vec3 at(0.025f + 0.05f * a, 0.025f + 0.05f * b, 0.0f);
+      EXPECT_EQ(field3.causticRadiance(at, at + Vec3(0, 0, 0.1f)), field2.causticRadiance(at, at + Vec3(0, 0, 0.1f)));
+    }
 }
 
 std::string dragonScenePath() { return test::sourceDir() + "/data/scenes/cornell-dragon.json"; }

@@ -20,6 +20,7 @@ namespace voxcone {
 
 class Scene;
 struct PhotonMaps;
+struct Photon;
 
 /// Voxelization and injection settings.
 struct VoxelSettings {
@@ -78,7 +79,11 @@ public:
   /// are active (triangle-box overlap, Akenine-Möller 2001); per voxel the surface area inside
   /// it, the area-weighted normal and diffuse albedo. Specular-only surfaces get opacity but
   /// no albedo (they gather no light). Throws SettingsError for bad settings.
-  static VoxelField voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress = nullptr);
+  /// With `causticPhotons`, the caustic grid (settings.causticLevel) holds only the voxels
+  /// those photons' footprints reach (what inject keeps of it anyway), instead of the whole
+  /// scene at that level; without, it is voxelized whole.
+  static VoxelField voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress = nullptr,
+                             const std::vector<Photon>* causticPhotons = nullptr);
 
   /// Splat photon power into the finest level with a normalized Gaussian footprint and turn it
   /// into outgoing radiance L = albedo / pi * E, E = power / surface area in the voxel. Caustic
