@@ -31,6 +31,7 @@ struct CompareArgs {
   std::string errorImagePath;
   double errorScale = 0.0;
   bool json = false;
+  int regions = 0;
   CLI::Option* thresholdRelMseOpt = nullptr;
   CLI::Option* thresholdPsnrOpt = nullptr;
 };
@@ -68,14 +69,40 @@ void runCompare(const CompareArgs& args) {
     writeImage(args.errorImagePath, falseColorError(test, ref, args.errorScale), meta);
   }
 
+  std::vector<RegionError> cells;
+  if (args.regions > 0) cells = regionErrors(test, ref, args.regions);
+  const auto lum = [](const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; };
   if (args.json) {
-    std::cout << m.toJson().dump() << std::endl;
+    nlohmann::json j = m.toJson();
+    for (const RegionError& c : cells)
+      j["regions"].push_back({{"x0", c.x0}, {"y0", c.y0}, {"x1", c.x1}, {"y1", c.y1},
+                              {"mean_test", {c.meanTest.x, c.meanTest.y, c.meanTest.z}},
+                              {"mean_reference", {c.meanReference.x, c.meanReference.y, c.meanReference.z}},
+                              {"error_share", c.errorShare}});
+    std::cout << j.dump() << std::endl;
   } else {
     std::cout << "relMSE        " << format("%.6g", m.relMse) << "\n"
               << "MSE           " << format("%.6g", m.mse) << "\n"
               << "PSNR (sRGB8)  " << (std::isinf(m.psnrSrgb8) ? std::string("inf") : format("%.4f", m.psnrSrgb8))
               << " dB\n"
               << "SSIM          " << format("%.6f", m.ssim) << std::endl;
+    if (!cells.empty()) {
+      // Per cell: the luminance ratio test / reference (the bias where the noise averages out)
+      // and the cell's share of the image's sRGB8 squared error, rows top to bottom.
+      std::cout << "regions (" << args.regions << "x" << args.regions
+                << "): luminance test/reference, share of the sRGB8 error\n";
+      for (int cy = 0; cy < args.regions; ++cy) {
+        std::string row;
+        for (int cx = 0; cx < args.regions; ++cx) {
+          const RegionError& c = cells[size_t(cy) * size_t(args.regions) + size_t(cx)];
+          const double r = lum(c.meanReference);
+          row += (r > 0.0 ? format("%6.3f", lum(c.meanTest) / r) : std::string("     -")) +
+                 format(" %4.1f%%  ", 100.0 * c.errorShare);
+        }
+        std::cout << row << "\n";
+      }
+      std::cout << std::flush;
+    }
   }
 
   // Thresholds: written as !(value within bound) so that a NaN metric fails.
@@ -118,6 +145,11 @@ void addCompareCommand(CLI::App& app) {
                   "give two images the same scale to compare them")
       ->check(CLI::PositiveNumber)
       ->type_name("X");
+  sub->add_option("--regions", args->regions,
+                  "Also print an N x N grid of cells: each cell's luminance ratio test/reference and its share of "
+                  "the sRGB8 squared error")
+      ->check(CLI::Range(1, 64))
+      ->type_name("N");
   sub->add_flag("--json", args->json, "Print the metrics as one JSON object instead of the table");
   sub->callback([args]() { runCompare(*args); });
 }

@@ -230,6 +230,42 @@ ImageMetrics compareImages(const Image& test, const Image& reference) {
   return m;
 }
 
+std::vector<RegionError> regionErrors(const Image& test, const Image& reference, int n) {
+  checkSizes(test, reference);
+  if (n < 1 || n > std::min(test.width, test.height))
+    throw ImageError("compare: regions must be in [1, " + std::to_string(std::min(test.width, test.height)) +
+                     "], got " + std::to_string(n));
+  std::vector<RegionError> cells;
+  std::vector<uint64_t> sq8(size_t(n) * size_t(n), 0);
+  uint64_t total = 0;
+  for (int cy = 0; cy < n; ++cy)
+    for (int cx = 0; cx < n; ++cx) {
+      RegionError c;
+      c.x0 = int(int64_t(cx) * test.width / n);
+      c.x1 = int(int64_t(cx + 1) * test.width / n);
+      c.y0 = int(int64_t(cy) * test.height / n);
+      c.y1 = int(int64_t(cy + 1) * test.height / n);
+      uint64_t& e = sq8[size_t(cy) * size_t(n) + size_t(cx)];
+      for (int y = c.y0; y < c.y1; ++y)
+        for (int x = c.x0; x < c.x1; ++x) {
+          const size_t i = size_t(y) * size_t(test.width) + size_t(x);
+          for (int ch = 0; ch < 3; ++ch) {
+            c.meanTest[ch] += double(test.pixels[i][ch]);
+            c.meanReference[ch] += double(reference.pixels[i][ch]);
+            const int64_t d8 = toSrgb8(test.pixels[i][ch]) - toSrgb8(reference.pixels[i][ch]);
+            e += uint64_t(d8 * d8);
+          }
+        }
+      const double pixels = double(c.x1 - c.x0) * double(c.y1 - c.y0);
+      c.meanTest /= pixels;
+      c.meanReference /= pixels;
+      total += e;
+      cells.push_back(c);
+    }
+  for (size_t i = 0; i < cells.size(); ++i) cells[i].errorShare = total > 0 ? double(sq8[i]) / double(total) : 0.0;
+  return cells;
+}
+
 Image falseColorError(const Image& test, const Image& reference, double maxError) {
   checkSizes(test, reference);
   const size_t n = test.pixels.size();

@@ -170,6 +170,35 @@ TEST(MetricsCompare, PsnrOneCodeOffset) {
   EXPECT_NEAR(compareImages(ref, test).psnrSrgb8, 48.1308036086791, 1e-9);
 }
 
+TEST(MetricsCompare, RegionErrorsHandComputed) {
+  // 5 x 3 in a 2 x 2 grid: cells are columns [0, 2) and [2, 5), rows [0, 1) and [1, 3). The
+  // reference is 0.5 everywhere (code 188); the test is 1.0 (code 255, 67 codes off) in pixel
+  // (4, 2) only: all the error is in the bottom-right cell, whose mean is (5 * 0.5 + 1) / 6.
+  Image ref(5, 3), test(5, 3);
+  for (Vec3& p : ref.pixels) p = Vec3(0.5f);
+  test = ref;
+  test.at(4, 2) = Vec3(1.0f);
+  const std::vector<RegionError> cells = regionErrors(test, ref, 2);
+  ASSERT_EQ(cells.size(), 4u);
+  EXPECT_EQ(cells[1].x0, 2);
+  EXPECT_EQ(cells[1].x1, 5);
+  EXPECT_EQ(cells[2].y0, 1);
+  EXPECT_EQ(cells[2].y1, 3);
+  EXPECT_DOUBLE_EQ(cells[3].errorShare, 1.0);
+  EXPECT_DOUBLE_EQ(cells[0].errorShare, 0.0);
+  EXPECT_NEAR(cells[3].meanTest.x, (5 * 0.5 + 1.0) / 6.0, 1e-12);
+  EXPECT_NEAR(cells[3].meanReference.y, 0.5, 1e-12);
+  EXPECT_NEAR(cells[0].meanTest.z, 0.5, 1e-12);
+  // Two wrong pixels in different cells, one twice the other's squared code error per channel.
+  test.at(0, 0) = Vec3(srgbToLinear((188.0f + 67.0f / std::sqrt(2.0f)) / 255.0f));
+  const std::vector<RegionError> two = regionErrors(test, ref, 2);
+  EXPECT_NEAR(two[3].errorShare, 2.0 / 3.0, 0.02);
+  EXPECT_NEAR(two[0].errorShare + two[3].errorShare, 1.0, 1e-12);
+  EXPECT_THROW(regionErrors(test, ref, 4), ImageError);  // more cells than rows
+  EXPECT_THROW(regionErrors(test, ref, 0), ImageError);
+  EXPECT_THROW(regionErrors(test, Image(3, 3), 1), ImageError);
+}
+
 TEST(MetricsCompare, SsimOfConstantImages) {
   // Constant images have zero variance and covariance in every window, so SSIM reduces to the
   // luminance term (2 a b + C1) / (a^2 + b^2 + C1) with C1 = (0.01*255)^2 = 6.5025.

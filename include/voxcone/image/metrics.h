@@ -6,6 +6,8 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include <vector>
+
 namespace voxcone {
 
 /// Errors of a test image against a reference of the same size.
@@ -43,6 +45,20 @@ ImageMetrics compareImages(const Image& test, const Image& reference);
 /// does not count thousands of times over. For two independent estimates it is about twice the
 /// relMSE of one against the truth. Throws ImageError if the sizes differ or either is empty.
 double relMseOfEstimates(const Image& a, const Image& b);
+
+/// One cell of regionErrors: a rectangle of the image.
+struct RegionError {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  ///< pixels [x0, x1) x [y0, y1)
+  DVec3 meanTest{0.0}, meanReference{0.0};
+  /// The cell's share of the whole image's 8-bit sRGB squared error (the cells sum to 1; 0 for
+  /// identical images).
+  double errorShare = 0.0;
+};
+
+/// The image cut into an n x n grid of cells (row-major, top row first; cells differ by at most
+/// one pixel in size): each cell's means and share of the sRGB8 error, to see where a method's
+/// error sits (n in [1, min(width, height)]). Throws ImageError as compareImages.
+std::vector<RegionError> regionErrors(const Image& test, const Image& reference, int n);
 
 /// False-colour map of the per-pixel relative squared error (mean over channels of
 /// (t-r)^2/(r^2+eps)) on a perceptually ordered colour ramp, scaled so that `maxError` maps to
