@@ -674,18 +674,23 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
     throw SettingsError("caustic level must be 0 or in [coarsest level, 13], got " +
                         std::to_string(settings.causticLevel));
   if (scene.triangleCount() == 0 || scene.bounds().empty()) throw SettingsError("cannot voxelize a scene without triangles");
+  if (!(settings.padding >= 0.0 && settings.padding <= 1.0))
+    throw SettingsError("field padding must be in [0, 1] (a fraction of the scene's side), got " +
+                        std::to_string(settings.padding));
 
   VoxelField field;
   Impl& f = *field.m_impl;
   f.settings = settings;
   const Bounds3& sb = scene.bounds();
-  f.origin = DVec3(sb.lo);
-  f.originF = sb.lo;
   const DVec3 diag = DVec3(sb.hi) - DVec3(sb.lo);
+  const double side = std::max(diag.x, std::max(diag.y, diag.z));
+  const double pad = settings.padding * side;
+  f.origin = DVec3(sb.lo) - DVec3(pad);
+  f.originF = Vec3(f.origin);
   // Pad by a relative 1e-6 so the max corner falls inside the last voxel, not on its far face.
-  f.extent = std::max(diag.x, std::max(diag.y, diag.z)) * (1.0 + 1e-6);
+  f.extent = (side + 2.0 * pad) * (1.0 + 1e-6);
   if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
-  f.bounds = Bounds3(sb.lo, Vec3(f.origin + DVec3(f.extent)));
+  f.bounds = Bounds3(Vec3(f.origin), Vec3(f.origin + DVec3(f.extent)));
 
   auto build = [&](Grid& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
     Timer timer;

@@ -2,6 +2,7 @@
 
 #include "../support/temp_dir.h"
 #include "../support/test_scenes.h"
+#include "voxcone/voxel/voxel_field.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -30,7 +31,7 @@ TEST_F(CliVoxel, VoxelizePrintsJsonTableAndWritesVdb) {
   std::ifstream f(path("out.json"));
   const nlohmann::json j = nlohmann::json::parse(f);
   EXPECT_EQ(j["level"], 6);
-  EXPECT_NEAR(j["voxel_size"].get<double>(), 559.2 / 64.0, 0.01);
+  EXPECT_NEAR(j["voxel_size"].get<double>(), 559.2 * (1.0 + 2.0 * kDefaultFieldPadding) / 64.0, 0.01);
   EXPECT_GT(j["total_bytes"].get<double>(), 0.0);
   // One row per grid and level, levels 6..3 for each grid kind.
   int finestTopology = 0;

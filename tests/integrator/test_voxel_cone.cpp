@@ -177,18 +177,19 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
       const float vc = floorRadiance(scene, "voxcone", options, at.x, at.y, 256).x;
       return vc / ref;
     };
-    // The default (6 marched cones): measured +15.8% / +15.4% at the two points. Besides the
-    // field's own +5%, lookups beside the occluder's edge count part of it for axes that just
-    // miss it, while axes that just hit it count it whole (the exact segment). It was +33%
-    // before the march followed the cone's own axis, and +1000% when the occluder's voxels
-    // mixed its lit top into its underside.
-    EXPECT_NEAR(ratio({}), 1.0f, 0.2f);
+    // The default (6 marched cones): measured +6.8% / +5.7% at the two points (+15.8% / +15.4%
+    // before the field had a margin: the plane lay on its boundary). Besides the field's own
+    // error, lookups beside the occluder's edge count part of it for axes that just miss it,
+    // while axes that just hit it count it whole (the exact segment). It was +33% before the
+    // march followed the cone's own axis, and +1000% when the occluder's voxels mixed its lit
+    // top into its underside.
+    EXPECT_NEAR(ratio({}), 1.0f, 0.1f);
     // gather = hit with narrow cones is close; with the 6 default cones it fails: a cone whose
     // axis misses the occluder counts none of it (and one that hits counts all), and its
-    // lookup at the cone's width mixes the underside with the floor: measured -45% / -54%;
-    // narrow cones +5.5% / +5.2%.
+    // lookup at the cone's width mixes the underside with the floor: measured -9% / -23%
+    // (-45% / -54% without the field's margin); narrow cones +5.9% / +7.4%.
     EXPECT_NEAR(ratio({{"gather", "hit"}, {"cones", 64}}), 1.0f, 0.1f);
-    EXPECT_LT(ratio({{"gather", "hit"}}), 0.7f);
+    EXPECT_LT(ratio({{"gather", "hit"}}), 0.95f);
   }
 }
 

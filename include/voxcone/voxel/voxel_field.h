@@ -23,6 +23,16 @@ struct PhotonMaps;
 struct Photon;
 
 /// Voxelization and injection settings.
+/// The field's default margin: 1/16 of the scene's longest side on every side (so its side is
+/// 1.125 times the scene's). Measured (256x256, 16 spp, 8 gathers, filter 8, level 6, against
+/// path at 4096 spp): cornell-box 39.26 dB without a margin, 39.62 / 40.82 / 40.93 / 41.01 /
+/// 40.32 / 40.12 dB at 1/64, 1/32, 1/25, 1/16, 3/40, 1/8; cornell-dragon 40.25 dB without,
+/// 41.45 / 41.43 / 40.51 dB at 1/32, 1/16, 3/32. Without it the walls at the bounds' lower
+/// corner (x = 0, y = 0) lie on the boundary face of every level's outer voxels: the ceiling's
+/// indirect light (its cones end on the floor) was 13-16% dark and the short box's front 35%
+/// bright; with it 8-12% and 20-23%.
+constexpr double kDefaultFieldPadding = 1.0 / 16.0;
+
 struct VoxelSettings {
   int level = 8;             ///< finest level, [1, 13]
   int coarsestLevel = 2;     ///< coarsest mip level built, [0, level]
@@ -31,6 +41,9 @@ struct VoxelSettings {
   float kernelSigmaVoxels = 0.75f;
   /// Level of the caustic grid (finer than `level` for sharp caustics); 0: no caustic grid.
   int causticLevel = 0;
+  /// Empty margin around the scene's bounds on every side, as a fraction of their longest side,
+  /// so that no surface sits on the field's boundary (see kDefaultFieldPadding); [0, 1].
+  double padding = kDefaultFieldPadding;
 };
 
 /// Memory and time of one grid at one level.
