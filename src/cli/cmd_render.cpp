@@ -148,8 +148,10 @@ void runRender(const RenderOptions& o) {
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
   t.reset();
   writeExr(exrPath, result.image, meta);
+  const double exrSec = t.seconds();
   writePng(pngPath, result.image);
   meta["timings"]["write_seconds"] = t.seconds();
+  meta["timings"]["write_exr_seconds"] = exrSec;
   meta["timings"]["total_seconds"] = total.seconds();
   meta["peak_rss_bytes"] = peakRssBytes();
   meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};

@@ -148,7 +148,9 @@ void writeJsonAtomic(const std::string& path, const nlohmann::json& value) {
 void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata) {
   checkImage(path, image);
   OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
-  spec.attribute("compression", "zip");
+  // Lossless RLE: a rendered float image barely compresses (zip: 730 KB instead of 795 KB
+  // uncompressed at 256x256), and zip took 12.5 ms of a 0.17 s render there, RLE 5 ms (758 KB).
+  spec.attribute("compression", "rle");
   spec.attribute("oiio:ColorSpace", "Linear");
   if (metadata.is_object()) {
     for (const auto& item : metadata.items()) spec.attribute("voxcone:" + item.key(), item.value().dump());
@@ -175,6 +177,8 @@ void writePng(const std::string& path, const Image& image) {
   }
   OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
   spec.attribute("oiio:ColorSpace", "sRGB");
+  // zlib level 1: 6.5 ms instead of 18 ms at 256x256 (the default 6), 74 KB.
+  spec.attribute("png:compressionLevel", 1);
   atomicWrite<ImageError>(path, [&](const std::string& tmpPath) {
     writeWithOiio(path, tmpPath, spec, codes.data());
   });
