@@ -29,19 +29,50 @@ bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q) {
 namespace {
 bool isEstimated(const IndirectBuffer& in, size_t p) { return in.estimated.empty() || in.estimated[p]; }
 
+/// Visits what filterable pixel p = (x, y) reaches along its row (bit 0) or column (bit 1):
+/// visit(q, d) for q at distance d = 1 .. radius on each side, walking outwards and stopping at
+/// the first neighbour that is not linked to the previous one (the link between two neighbours
+/// is stored on the left or upper one) or not on p's surface (sameFilterSurface). visit returns
+/// false to end the whole walk.
+template <class Visit>
+void walk(const IndirectBuffer& in, int radius, int bit, size_t p, int x, int y, Visit&& visit) {
+  const size_t stride = bit == 0 ? 1 : size_t(in.width);
+  const int pos = bit == 0 ? x : y, len = bit == 0 ? in.width : in.height;
+  for (int dir = -1; dir <= 1; dir += 2) {
+    size_t prev = p;
+    for (int d = 1; d <= radius; ++d) {
+      const int at = pos + dir * d;
+      if (at < 0 || at >= len) break;
+      const size_t q = dir > 0 ? prev + stride : prev - stride;
+      const size_t holder = dir > 0 ? prev : q;
+      if (!(in.link.empty() || ((in.link[holder] >> bit) & 1u)) || !sameFilterSurface(in, p, q)) break;
+      if (!visit(q, d)) return;
+      prev = q;
+    }
+  }
+}
+
+/// One pass over the image (rows in parallel): f(p, x, y) for every filterable pixel.
+template <class F>
+void forEachFilterable(const IndirectBuffer& in, F&& f) {
+  tbb::parallel_for(0, in.height, [&](int y) {
+    for (int x = 0; x < in.width; ++x) {
+      const size_t p = size_t(y) * size_t(in.width) + size_t(x);
+      if (in.filterable[p]) f(p, x, y);
+    }
+  });
+}
+
 /// The filter's weighted sums: num / den is a pixel's filtered light (den 0: no estimated pixel
 /// reached). Separable, rows then columns (as a separable bilateral filter): the row pass sums
 /// each pixel's estimated neighbours along its row, the column pass sums the row pass's sums
-/// along the column. Each pass walks from the pixel outwards and stops at the first neighbour
-/// that is not linked to the previous one or not on the walk's start's surface
-/// (sameFilterSurface), so light reaches a pixel only along an L-shaped chain of links.
-/// Weights: a Gaussian of standard deviation radius / 2 per axis (their product is the 2D
-/// Gaussian), times cos^8 of the normals (a soft edge inside the 25-degree cut; measured,
-/// dropping it leaves both canonical scenes' error unchanged). Fixed order: no thread dependence.
+/// along the column, each over walk()'s reach, so light reaches a pixel only along an L-shaped
+/// chain of links. Weights: a Gaussian of standard deviation radius / 2 per axis (their product
+/// is the 2D Gaussian), times cos^8 of the normals (a soft edge inside the 25-degree cut;
+/// measured, dropping it leaves both canonical scenes' error unchanged). Fixed order: no thread
+/// dependence.
 void filterSums(const IndirectBuffer& in, int radius, std::vector<DVec3>& num, std::vector<double>& den) {
-  const int w = in.width, h = in.height;
-  const size_t n = size_t(w) * size_t(h);
-  const auto linked = [&](size_t a, int bit) { return in.link.empty() || ((in.link[a] >> bit) & 1u); };
+  const size_t n = size_t(in.width) * size_t(in.height);
   // The window's edge at 2 sigma: the Gaussian has fallen to e^-2 there.
   const float sigma = 0.5f * float(radius);
   std::vector<float> gauss(size_t(radius) + 1);
@@ -50,36 +81,21 @@ void filterSums(const IndirectBuffer& in, int radius, std::vector<DVec3>& num, s
     const float c = glm::dot(in.normal[a], in.normal[b]), c2 = c * c, c4 = c2 * c2;
     return c4 * c4;
   };
-  // One pass: along `stride` (1: rows, width: columns), bit 0 / 1 the link to the next pixel.
   const auto pass = [&](const std::vector<DVec3>& srcNum, const std::vector<double>& srcDen, int bit,
                         std::vector<DVec3>& dstNum, std::vector<double>& dstDen) {
     dstNum.assign(n, DVec3(0.0));
     dstDen.assign(n, 0.0);
-    const size_t stride = bit == 0 ? 1 : size_t(w);
-    tbb::parallel_for(0, h, [&](int y) {
-      for (int x = 0; x < w; ++x) {
-        const size_t p = size_t(y) * size_t(w) + size_t(x);
-        if (!in.filterable[p]) continue;
-        const int pos = bit == 0 ? x : y, len = bit == 0 ? w : h;
-        DVec3 sn = srcNum[p];
-        double sd = srcDen[p];
-        for (int dir = -1; dir <= 1; dir += 2) {
-          size_t prev = p;
-          for (int d = 1; d <= radius; ++d) {
-            const int at = pos + dir * d;
-            if (at < 0 || at >= len) break;
-            const size_t q = dir > 0 ? prev + stride : prev - stride;
-            // The link between two neighbours is stored on the left or upper one.
-            if (!linked(dir > 0 ? prev : q, bit) || !sameFilterSurface(in, p, q)) break;
-            const double wq = double(gauss[size_t(d)] * cos8(p, q));
-            sn += wq * srcNum[q];
-            sd += wq * srcDen[q];
-            prev = q;
-          }
-        }
-        dstNum[p] = sn;
-        dstDen[p] = sd;
-      }
+    forEachFilterable(in, [&](size_t p, int x, int y) {
+      DVec3 sn = srcNum[p];
+      double sd = srcDen[p];
+      walk(in, radius, bit, p, x, y, [&](size_t q, int d) {
+        const double wq = double(gauss[size_t(d)] * cos8(p, q));
+        sn += wq * srcNum[q];
+        sd += wq * srcDen[q];
+        return true;
+      });
+      dstNum[p] = sn;
+      dstDen[p] = sd;
     });
   };
   std::vector<DVec3> num0(n, DVec3(0.0));
@@ -108,15 +124,27 @@ std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius) {
 }
 
 std::vector<uint8_t> unfilledPixels(const IndirectBuffer& in, int radius) {
-  std::vector<uint8_t> out(size_t(in.width) * size_t(in.height), 0u);
-  std::vector<DVec3> num;
-  std::vector<double> den;
-  if (radius <= 0) {
-    for (size_t p = 0; p < out.size(); ++p) out[p] = in.filterable[p] && !isEstimated(in, p);
-    return out;
-  }
-  filterSums(in, radius, num, den);
-  for (size_t p = 0; p < out.size(); ++p) out[p] = in.filterable[p] && !(den[p] > 0.0);
+  // filterSums' reach without its sums (its weights are positive, so den > 0 exactly where an
+  // estimated pixel is reached): each walk ends at the first pixel that carries one.
+  const size_t n = size_t(in.width) * size_t(in.height);
+  std::vector<uint8_t> row(n, 0u), reached(n, 0u);
+  for (size_t p = 0; p < n; ++p) row[p] = in.filterable[p] && isEstimated(in, p);
+  const auto pass = [&](const std::vector<uint8_t>& src, int bit, std::vector<uint8_t>& dst) {
+    forEachFilterable(in, [&](size_t p, int x, int y) {
+      bool found = src[p] != 0u;
+      if (!found && radius > 0)
+        walk(in, radius, bit, p, x, y, [&](size_t q, int) {
+          found = src[q] != 0u;
+          return !found;
+        });
+      dst[p] = found ? 1u : 0u;
+    });
+  };
+  std::vector<uint8_t> column(n, 0u);
+  pass(row, 0, reached);
+  pass(reached, 1, column);
+  std::vector<uint8_t> out(n, 0u);
+  for (size_t p = 0; p < n; ++p) out[p] = in.filterable[p] && !column[p];
   return out;
 }
 
