@@ -22,9 +22,9 @@ ConeSet::ConeSet(int count, float halfAngle) {
     const float phi = golden * float(i);
     m_cones[size_t(i)].axis = Vec3(r * std::cos(phi), r * std::sin(phi), z);
   }
-  // Cosine-weighted measure of each Voronoi cell: a 512 x 512 stratified grid through the
+  // Cosine-weighted measure of each Voronoi cell: a 256 x 256 stratified grid through the
   // concentric map (equal cosine-weighted measure per cell), each direction to its nearest axis.
-  constexpr int kGrid = 512;
+  constexpr int kGrid = 256;  // 512 took 4 ms at 6 cones (3% of a 256x256 render), 256 1 ms
   std::vector<double> sum(size_t(count), 0.0);
   for (int a = 0; a < kGrid; ++a)
     for (int b = 0; b < kGrid; ++b) {

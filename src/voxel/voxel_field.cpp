@@ -523,6 +523,14 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
   };
   std::vector<std::vector<Splat>> lists(std::min(blocks, kWave));
   std::vector<DVec3> blockDropped(lists.size());
+  // Each voxel's normal direction, decoded once, and |n|^2 (-1: no diffuse surface, which gathers
+  // no light): 125 voxels are tried per photon.
+  std::vector<glm::vec4> surface(lv.size());
+  tbb::parallel_for(size_t(0), lv.size(), [&](size_t v) {
+    const uint8_t* alb = &lv.albedo[3 * v];
+    const Vec3 n = decodeNormalDirection(lv.normal[v]);
+    surface[v] = glm::vec4(n, (alb[0] | alb[1] | alb[2]) == 0 ? -1.0f : glm::dot(n, n));
+  });
   for (size_t wave = 0; wave < blocks; wave += kWave) {
     if (progress && progress->cancelled()) throw CancelledError();
     const size_t waveBlocks = std::min(kWave, blocks - wave);
@@ -561,12 +569,11 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
               const int64_t v = lv.find(i, j, k, access);
               if (v < 0) continue;
               // Only voxels holding diffuse surface gather light.
-              const uint8_t* alb = &lv.albedo[3 * size_t(v)];
-              if ((alb[0] | alb[1] | alb[2]) == 0) continue;
+              const glm::vec4& sv = surface[size_t(v)];
+              if (sv.w < 0.0f) continue;
               // Voxels of another surface (kSameSurfaceCos) take none of the photon.
-              const Vec3 n = decodeNormalDirection(lv.normal[size_t(v)]);
-              const float cosNormals = glm::dot(n, ph.normal);
-              if (sqr(cosNormals) <= sqr(kSameSurfaceCos) * glm::dot(n, n)) continue;
+              const float cosNormals = glm::dot(Vec3(sv), ph.normal);
+              if (sqr(cosNormals) <= sqr(kSameSurfaceCos) * sv.w) continue;
               // Gaussian footprint times the surface area the voxel holds: a uniform photon
               // density then gives a uniform irradiance flux / area, where the plain Gaussian
               // would give a voxel clipped to a sliver of surface the flux of a full voxel (and
