@@ -59,7 +59,7 @@ void runVoxelize(const VoxelizeOptions& o) {
 
   PhotonSettings ps;
   uint64_t photons, causticPhotons;
-  defaultPhotonCounts(scene.render.photons, scene.render.causticPhotons, kVoxconeDefaultPhotons, photons,
+  defaultPhotonCounts(scene.render.photons, scene.render.causticPhotons, kVoxconeDefaultPhotons, kVoxconeDefaultCausticPhotons, photons,
                       causticPhotons);
   ps.photons = o.photons >= 0 ? uint64_t(o.photons) : photons;
   ps.causticPhotons = causticLevel > 0 ? (o.causticPhotons >= 0 ? uint64_t(o.causticPhotons) : causticPhotons) : 0;

@@ -32,7 +32,7 @@ PhotonMappingIntegrator::PhotonMappingIntegrator(const IntegratorContext& c)
   m_maxRadius = static_cast<float>(r.number("max_radius", defaultRadius, 1e-30, 1e30));
   constexpr int kMaxInt = std::numeric_limits<int>::max();
   uint64_t photons, causticPhotons;
-  defaultPhotonCounts(c.settings.photons, c.settings.causticPhotons, kPhotonMappingDefaultPhotons, photons,
+  defaultPhotonCounts(c.settings.photons, c.settings.causticPhotons, kPhotonMappingDefaultPhotons, 0, photons,
                       causticPhotons);
   m_photonSettings.photons =
       static_cast<uint64_t>(r.integer("photons", static_cast<int>(std::min<uint64_t>(photons, kMaxInt)), 0, kMaxInt));

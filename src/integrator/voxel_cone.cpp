@@ -26,17 +26,19 @@ namespace {
 constexpr float kClearance = 1.0f + 0.8660254f;
 /// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
 constexpr float kOpaque = 0.99f;
-/// Defaults chosen by time to error against path at 4096 spp (cornell-box and cornell-dragon,
-/// 256x256, 16 spp, 2 threads; the README's "Where voxcone's time goes" has the figures): level
-/// 6 (level 5 is faster on cornell-box but loses 0.9 dB on the dragon, level 7 costs 1.5x for
-/// +0.2 dB); cones on 2 of a pixel's samples with the screen-space filter of radius 3 (cornell-
-/// box: 36.9 / 38.3 / 38.7 dB at 1 / 2 / 4 gathers in 0.63 / 0.92 / 1.44 s; without the filter
-/// 2 gathers give 34.2 dB). Past a few samples the error is the cones' noise and bias, not the
-/// direct light's: 32 spp add 0.1 dB.
+/// Defaults chosen by time to error against path at 4096 spp (cornell-box, cornell-dragon and
+/// cornell-dragon-glass, 256x256, 2 threads; the README's "Where voxcone's time goes" has the
+/// figures): level 6 (level 5 is faster on cornell-box but loses 0.9 dB on the dragon, level 7
+/// costs 1.5x for +0.2 dB). Indirect light: one gathering pixel per 4x4 block, one gather there
+/// (its first sample), the filter of radius 12 filling the rest. Cornell-box at 4 spp (total s,
+/// dB): spacing 3 / 4 / 5 with filter 12 and 1 gather 0.21 / 0.17 / 0.17 s, 36.13 / 35.86 /
+/// 35.45 dB (2 gathers: +0.4-0.6 dB for +0.02-0.03 s); filter 8 / 10 / 12 at spacing 4: 35.22 /
+/// 35.64 / 35.86 dB in the same time; 3 spp 33.45 dB (direct light needs 4 stratified samples:
+/// 25.4 / 29.6 / 35.5 / 42.5 dB at 1 / 2 / 4 / 8 spp of it alone).
 constexpr int kDefaultLevel = 6;
-constexpr int kDefaultGathers = 2;
-constexpr int kDefaultFilterRadius = 3;
-constexpr int kDefaultGatherSpacing = 1;
+constexpr int kDefaultGathers = 1;
+constexpr int kDefaultFilterRadius = 12;
+constexpr int kDefaultGatherSpacing = 4;
 /// Names of VoxelConeIntegrator::View, in order.
 const std::vector<std::string> kViewNames = {"full", "direct", "indirect", "caustic", "field"};
 }  // namespace
@@ -57,7 +59,8 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
     throw SettingsError("voxcone.caustic_level: must be 0 or at least coarsest_level");
   m_voxelSettings.kernelSigmaVoxels = float(r.number("kernel_sigma", 0.75, 0.05, 16.0));
   uint64_t photons, causticPhotons;
-  defaultPhotonCounts(c.settings.photons, c.settings.causticPhotons, kVoxconeDefaultPhotons, photons, causticPhotons);
+  defaultPhotonCounts(c.settings.photons, c.settings.causticPhotons, kVoxconeDefaultPhotons,
+                      kVoxconeDefaultCausticPhotons, photons, causticPhotons);
   m_photonSettings.photons = uint64_t(r.integer("photons", int(std::min<uint64_t>(photons, kMaxInt)), 0, kMaxInt));
   m_photonSettings.causticPhotons =
       uint64_t(r.integer("caustic_photons", int(std::min<uint64_t>(causticPhotons, kMaxInt)), 0, kMaxInt));
@@ -75,7 +78,7 @@ VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
   m_lightSamples = r.integer("light_samples", 1, 1, 1024);
   m_gathers = r.integer("gathers", kDefaultGathers, 0, 1 << 24);
   m_filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 64);
-  m_gatherSpacing = r.integer("gather_spacing", kDefaultGatherSpacing, 1, 16);
+  m_gatherSpacing = r.integer("gather_spacing", m_filterRadius > 0 ? kDefaultGatherSpacing : 1, 1, 16);
   if (m_gatherSpacing > 1 && m_filterRadius == 0)
     throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
   m_exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));

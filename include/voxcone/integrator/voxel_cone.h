@@ -50,7 +50,7 @@
 /// Options (unknown keys are SettingsErrors):
 ///  - `level` [1, 12] (default 6), `coarsest_level` [0, level] (default 1);
 ///  - `photons`, `caustic_photons` (default the scene's render.photons / caustic_photons, else
-///    kVoxconeDefaultPhotons and a fifth of it),
+///    kVoxconeDefaultPhotons (10k) and kVoxconeDefaultCausticPhotons (20k)),
 ///    `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
 ///    `kernel_sigma` (photon footprint, finest voxels, default 0.75), `seed` (added to the
 ///    render seed for the photon pass);
@@ -58,16 +58,22 @@
 ///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
 ///    default: the scene's bounding-sphere diameter);
 ///  - `light_samples` (shadow rays per shading point, default 1);
-///  - `gathers`: how many of a pixel's samples gather indirect light by cones (default 2; 0:
-///    every one).
+///  - `gathers`: how many of a gathering pixel's samples gather indirect light by cones (default
+///    1; 0: every one).
 ///    With spp > gathers, only samples 0 .. gathers-1 gather, weighted spp / gathers: the pixel's
 ///    expected value is unchanged, direct light, edges and specular chains keep every sample,
 ///    and the cones (98% of the time) cost gathers instead of spp. The stratified sampler gives
 ///    those samples' cone rotations and positions a stratified subset of the pixel;
 ///  - `filter`: radius in pixels of the screen-space filter of the cones' indirect light at
-///    camera-visible diffuse surfaces (renderImage, filterIndirect; default 3, 0: off): each
+///    camera-visible diffuse surfaces (renderImage, filterIndirect; default 12, 0: off): each
 ///    pixel whose samples all saw one surface takes the Gaussian-weighted mean of its linked
-///    neighbours' indirect light on the same material, normal and plane;
+///    neighbours' indirect light on the same material, normal and plane; a pixel whose samples
+///    saw several surfaces takes, per sample, the filtered light of a filter pixel nearby on that
+///    sample's surface (or gathers itself where there is none);
+///  - `gather_spacing` [1, 16] (default 4 with the filter, 1 without; above 1 only with it): one pixel per
+///    spacing x spacing block gathers (the cones wait until every pixel's samples are taken,
+///    liSplit's DeferredGather); the filter fills the others, and any pixel it cannot fill
+///    gathers itself;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
 ///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
 ///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a

@@ -35,8 +35,8 @@ struct RenderSettings {
   /// Photons emitted for the global map; 0: the method's own default (voxcone
   /// kVoxconeDefaultPhotons, pm kPhotonMappingDefaultPhotons).
   uint64_t photons = 0;
-  /// Photons emitted for the caustic map, when caustics are possible; 0: a fifth of the global
-  /// map's.
+  /// Photons emitted for the caustic map, when caustics are possible; 0: the method's default
+  /// (voxcone kVoxconeDefaultCausticPhotons, pm a fifth of the global map's).
   uint64_t causticPhotons = 0;
   /// Throws SettingsError naming the offending value.
   void validate() const;
