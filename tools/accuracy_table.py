@@ -4,7 +4,8 @@
     tools/accuracy_table.py SCENE.json REFERENCE.exr OUTDIR [--threads N] [--target-db DB]
                             [--figure-photons N] [--quick] [--res WxH]
 
-Rows: voxcone (defaults at 4, 16 and 64 spp; 16 narrower cones; gather = hit with 16 cones),
+Rows: voxcone (defaults at 2, 4, 8, 16 and 64 spp; its most accurate settings: every pixel
+gathering 16 times with 16 narrower cones at 64 spp; gather = hit with 16 cones),
 pm (defaults, 16 spp) and two path-tracing ladders (4 ... 1024 spp): the default (Owen-scrambled
 Sobol) sampler and the independent one, so that the sampler's gain is measured in the same run. For every row that is not
 path it gives the time path needs to reach the same relMSE, interpolated log-log between the
@@ -17,9 +18,10 @@ false-colour relative-error images on one scale (the larger 99th percentile of t
 study's "traditional vs cones" figure; OUTDIR/figure.png puts both images, the reference and the
 error maps side by side when oiiotool is installed.
 
-Writes OUTDIR/table.md and OUTDIR/table.json; total time = photon tracing + voxelization +
-rendering, from each render's JSON sidecar. Read ratios within one run: timings on a shared
-machine vary.
+Writes OUTDIR/table.md and OUTDIR/table.json; total time = everything from loading the scene to
+writing the images (the sidecar's total_seconds), the median of --repeat runs for renders under
+5 s (the images are deterministic: only the time varies). Read ratios within one run: timings
+on a shared machine vary.
 """
 
 import argparse
@@ -39,12 +41,18 @@ def render(args, name, method, spp, options, sampler="sobol"):
     out = os.path.join(args.outdir, name + ".exr")
     cmd = [args.bin, "render", args.scene, "--method", method, "--spp", str(spp), "-t", str(args.threads), "-q",
            "-o", out, "--options", json.dumps(options), "--sampler", sampler]
-    run(cmd + (["--res", args.res] if args.res else []))
-    with open(os.path.join(args.outdir, name + ".json")) as f:
-        sidecar = json.load(f)
+    cmd += ["--res", args.res] if args.res else []
+    times = []
+    while True:
+        run(cmd)
+        with open(os.path.join(args.outdir, name + ".json")) as f:
+            sidecar = json.load(f)
+        times.append(sidecar["timings"]["total_seconds"])
+        if len(times) >= args.repeat or times[0] >= 5.0:
+            break
     metrics = json.loads(run([args.bin, "compare", out, args.reference, "--json"]))
     return {"name": name, "method": method, "sampler": sampler, "spp": spp, "options": options,
-            "seconds": sidecar["timings"]["total_seconds"], "relmse": metrics["relmse"],
+            "seconds": sorted(times)[len(times) // 2], "runs": times, "relmse": metrics["relmse"],
             "psnr_srgb8": metrics["psnr_srgb8"], "relerr_p99": metrics["relerr_p99"], "exr": out}
 
 
@@ -79,6 +87,8 @@ def main():
     p.add_argument("outdir")
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--target-db", type=float, default=35.0)
+    p.add_argument("--target-ratio", type=float, default=0.1, help="the ratio voxcone / path the issue asks for")
+    p.add_argument("--repeat", type=int, default=3, help="runs per render under 5 s; the median time is kept")
     p.add_argument("--figure-photons", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="few, cheap rows (for the tests)")
     p.add_argument("--res", help="resolution WIDTHxHEIGHT instead of the scene's (the reference's)")
@@ -92,11 +102,12 @@ def main():
         path_spp = [1, 4, 16]
         voxcone_default = ["voxcone-d1", "voxcone-d4"]
     else:
-        others = [("voxcone-d4", "voxcone", 4, {}), ("voxcone-d16", "voxcone", 16, {}),
-                  ("voxcone-d64", "voxcone", 64, {}), ("voxcone-c16", "voxcone", 16, {"cones": 16}),
+        others = [("voxcone-d2", "voxcone", 2, {}), ("voxcone-d4", "voxcone", 4, {}), ("voxcone-d8", "voxcone", 8, {}),
+                  ("voxcone-d16", "voxcone", 16, {}), ("voxcone-d64", "voxcone", 64, {}),
+                  ("voxcone-best64", "voxcone", 64, {"gather_spacing": 1, "gathers": 16, "filter": 8, "cones": 16}),
                   ("voxcone-hit16", "voxcone", 16, {"gather": "hit", "cones": 16}), ("pm-d16", "pm", 16, {})]
-        path_spp = [4, 16, 64, 256, 1024]
-        voxcone_default = ["voxcone-d4", "voxcone-d16", "voxcone-d64"]
+        path_spp = [4, 8, 16, 32, 64, 256, 1024]
+        voxcone_default = ["voxcone-d2", "voxcone-d4", "voxcone-d8", "voxcone-d16", "voxcone-d64"]
 
     rows = [render(args, *o) for o in others]
     paths = [render(args, "path%d" % spp, "path", spp, {}) for spp in path_spp]
@@ -145,10 +156,10 @@ def main():
             r["psnr_srgb8"], "" if same is None else "%s%.2f" % (r["path_extrapolated"], same),
             "" if same is None else "%.2f" % (same / r["seconds"])))
     lines.append("")
-    lines.append("Time to %.1f dB: path %s%.2f s, voxcone (defaults) %s%.2f s: voxcone takes %.2fx path's time "
-                 "(target: at most 0.1x)." % (args.target_db, "~" if target["path_extrapolated"] else "",
-                                                path_t, "~" if target["voxcone_extrapolated"] else "", vc_t,
-                                                target["ratio"]))
+    lines.append("Time to %.1f dB: path %s%.2f s, voxcone (defaults) %s%.2f s: voxcone takes %.3fx path's time "
+                 "(target: at most %.2gx)." % (args.target_db, "~" if target["path_extrapolated"] else "",
+                                                 path_t, "~" if target["voxcone_extrapolated"] else "", vc_t,
+                                                 target["ratio"], args.target_ratio))
     lines.append("Path's time to %.1f dB by sampler: sobol %s%.2f s, independent %s%.2f s (sobol takes %.2fx the "
                  "time)." % (args.target_db, "~" if target["path_extrapolated"] else "", path_t,
                              "~" if target["path_independent_extrapolated"] else "", indep_t, path_t / indep_t))

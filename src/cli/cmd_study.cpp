@@ -161,16 +161,20 @@ nlohmann::json sweepManifest(const SweepOptions& o) {
             {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}},
             {{"method", "voxcone"}, {"target_error", 0.05}}};
   } else {
-    grid = {{{"method", "path"}, {"spp", {4, 16, 64, 256, 1024}}},
+    grid = {{{"method", "path"}, {"spp", {4, 8, 16, 32, 64, 256, 1024}}},
             {{"method", "pm"}, {"spp", 16}, {"options", {{"photons", {100000, 300000, 1000000}}}}},
-            // voxcone at 16 spp: cones on 1, 2, 4, 8 or all 16 of each pixel's samples, with and
-            // without the screen-space indirect filter.
-            {{"method", "voxcone"}, {"spp", 16},
-             {"options",
-              {{"level", {5, 6, 7}}, {"photons", 100000}, {"gathers", {1, 2, 4, 8, 16}}, {"filter", {0, 3}}}}},
+            // voxcone's defaults over spp, then where its indirect light is gathered: one pixel
+            // per 1x1, 2x2 or 4x4 block, 1, 4 or 16 gathers there, at 4 and 16 spp; levels 5-7.
+            {{"method", "voxcone"}, {"spp", {2, 4, 8, 16, 64}}},
+            {{"method", "voxcone"}, {"spp", {4, 16}},
+             {"options", {{"gather_spacing", {1, 2, 4}}, {"gathers", {1, 4, 16}}}}},
+            {{"method", "voxcone"}, {"spp", 16}, {"options", {{"level", {5, 7}}}}},
+            // Its most accurate: every pixel gathering 16 times with 16 cones, 64 spp.
+            {{"method", "voxcone"}, {"spp", 64},
+             {"options", {{"gather_spacing", 1}, {"gathers", 16}, {"filter", 8}, {"cones", {6, 16}}}}},
             // render --target-error / --time-budget: where its choices land against the fronts.
             {{"method", "voxcone"}, {"target_error", {0.01, 0.005, 0.003}}},
-            {{"method", "voxcone"}, {"time_budget", {5, 10, 20}}}};
+            {{"method", "voxcone"}, {"time_budget", {1, 2, 5}}}};
   }
   return {{"reference", fs::absolute(o.referencePath).string()}, {"defaults", defaults}, {"grid", grid}};
 }

@@ -47,7 +47,7 @@ TEST_F(AccuracyTable, QuickRunTablesTheImagesItWrote) {
   const std::string ref = path("ref.exr");
   ASSERT_EQ(std::system((cli + " render " + scene + " --res 24x24 --spp 64 -q -o " + ref + " > /dev/null").c_str()), 0);
   const std::string cmd = "/usr/bin/python3 " + kTool + " " + scene + " " + ref + " " + path("out") +
-                          " --quick --res 24x24 --threads 1 --figure-photons 5000 --bin " + cli + " > /dev/null";
+                          " --quick --repeat 1 --res 24x24 --threads 1 --figure-photons 5000 --bin " + cli + " > /dev/null";
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   std::ifstream f(path("out/table.json"));
   const nlohmann::json t = nlohmann::json::parse(f);
