@@ -11,7 +11,9 @@
 #include "voxcone/integrator/integrator.h"
 
 #include <nlohmann/json.hpp>
+#include <tbb/task_group.h>
 
+#include <exception>
 #include <filesystem>
 #include <regex>
 
@@ -146,10 +148,35 @@ void runRender(const RenderOptions& o) {
                    {"indirect_filter", result.filterStats}};
 
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
+  // The EXR and the PNG are written side by side (5 and 6.5 ms at 256x256, one after the other
+  // 11.5 ms of a 0.13 s render); each is atomic on its own.
   t.reset();
-  writeExr(exrPath, result.image, meta);
-  const double exrSec = t.seconds();
-  writePng(pngPath, result.image);
+  double exrSec = 0.0;
+  std::exception_ptr exrError, pngError;
+  tbb::task_group writes;
+  writes.run([&] {
+    try {
+      Timer te;
+      writeExr(exrPath, result.image, meta);
+      exrSec = te.seconds();
+    } catch (...) {
+      exrError = std::current_exception();
+    }
+  });
+  writes.run_and_wait([&] {
+    try {
+      writePng(pngPath, result.image);
+    } catch (...) {
+      pngError = std::current_exception();
+    }
+  });
+  if (exrError || pngError) {
+    // Not half a set: the one that was written goes too.
+    std::error_code ec;
+    if (!exrError) std::filesystem::remove(exrPath, ec);
+    if (!pngError) std::filesystem::remove(pngPath, ec);
+    std::rethrow_exception(exrError ? exrError : pngError);
+  }
   meta["timings"]["write_seconds"] = t.seconds();
   meta["timings"]["write_exr_seconds"] = exrSec;
   meta["timings"]["total_seconds"] = total.seconds();

@@ -2,7 +2,7 @@
 #include "voxcone/integrator/integrator.h"
 #include "voxcone/integrator/path.h"
 #include "voxcone/integrator/photon_mapping.h"
-#include "voxcone/integrator/voxel_cone.h"
+#include "voxcone/integrator/voxel_cone/voxel_cone.h"
 #include "voxcone/integrator/whitted.h"
 
 #include <map>

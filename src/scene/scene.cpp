@@ -26,6 +26,8 @@ void Scene::finalize() {
 
   // Lights: emissive triangles then point lights, chosen in proportion to emitted power.
   m_emissiveTris.clear();
+  m_emissiveArea.clear();
+  m_emissiveNormal.clear();
   m_triLightIndex.assign(triangles.size(), -1);
   std::vector<float> power;
   for (uint32_t t = 0; t < triangles.size(); ++t) {
@@ -38,6 +40,11 @@ void Scene::finalize() {
     if (!(flux > 0.0f)) continue;
     m_triLightIndex[t] = static_cast<int32_t>(m_emissiveTris.size());
     m_emissiveTris.push_back(t);
+    // The same arithmetic sampleLight used per sample (so its results are unchanged).
+    const UVec3& tri = triangles[t];
+    const Vec3 cr = glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]);
+    m_emissiveArea.push_back(area);
+    m_emissiveNormal.push_back(cr / (2.0f * area));
     power.push_back(flux);
   }
   for (const PointLight& pl : pointLights) power.push_back(4.0f * kPi * std::max(0.0f, luminance(pl.intensity)));
@@ -114,9 +121,8 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice) const {
     const Vec3& p1 = positions[tri.y];
     const Vec3& p2 = positions[tri.z];
     const Vec3 p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, ls.lightPosError);
-    const Vec3 cr = glm::cross(p1 - p0, p2 - p0);
-    const float area = 0.5f * glm::length(cr);
-    const Vec3 n = cr / (2.0f * area);
+    const float area = m_emissiveArea[idx];
+    const Vec3& n = m_emissiveNormal[idx];
     const Vec3 d = p - ref;
     const float dist2 = glm::dot(d, d);
     if (!(dist2 > 0.0f)) return ls;

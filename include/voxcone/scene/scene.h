@@ -129,6 +129,8 @@ public:
 private:
   Bounds3 m_bounds;
   std::vector<uint32_t> m_emissiveTris;    ///< light index i < size: triangle id
+  std::vector<float> m_emissiveArea;       ///< per emissive triangle: its area
+  std::vector<Vec3> m_emissiveNormal;      ///< per emissive triangle: its unit winding normal
   std::vector<float> m_lightCdf;           ///< cumulative power, normalized; lights are
                                            ///< [emissive triangles..., point lights...]
   std::vector<float> m_lightPmf;

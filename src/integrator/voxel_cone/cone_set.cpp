@@ -1,4 +1,4 @@
-#include "voxcone/integrator/cone_set.h"
+#include "voxcone/integrator/voxel_cone/cone_set.h"
 
 #include "voxcone/core/error.h"
 #include "voxcone/core/sampling.h"

@@ -4,13 +4,17 @@
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
-#include "voxcone/integrator/cone_set.h"
+#include "voxcone/image/metrics.h"
+#include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/integrator.h"
 
-#include "../support/render_helpers.h"
-#include "../support/test_scenes.h"
+#include "../../support/render_helpers.h"
+#include "../../support/test_scenes.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <fstream>
 
 namespace voxcone {
 namespace {
@@ -131,6 +135,62 @@ TEST(VoxelCone, CornellBoxMeanMatchesPath) {
   // surface apart and the march followed the cone's own axis it was +6.3%, +6.9%, +4.9%.
   const test::CornellMeans m = test::cornellBoxMeans("voxcone", {{"photons", 100000}, {"level", 6}});
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(m.method[c], m.path[c], 0.05 * m.path[c]) << "channel " << c;
+}
+
+/// cornell-box with a glass ball (radius 90, index 1.5) in place of the short block: its
+/// caustic on the floor and everything seen through it.
+Scene cornellGlassBall() {
+  std::ifstream f(test::sourceDir() + "/data/scenes/cornell-box.json");
+  nlohmann::json j = nlohmann::json::parse(f);
+  nlohmann::json shapes = nlohmann::json::array();
+  for (const nlohmann::json& shape : j["shapes"])
+    if (shape.value("name", "").rfind("short_block", 0) != 0) shapes.push_back(shape);
+  shapes.push_back({{"type", "sphere"}, {"name", "ball"}, {"center", {185, 95, 170}}, {"radius", 90},
+                    {"subdivisions", 4}, {"material", "glass"}});
+  j["shapes"] = shapes;
+  j["materials"]["glass"] = {{"type", "dielectric"}, {"ior", 1.5}};
+  return parseScene(j.dump(), "cornell-glass-ball", test::sourceDir() + "/data/scenes");
+}
+
+/// voxcone's defaults against converged path (1024 spp) on `scene` at 64x64, cell by cell of a
+/// 4 x 4 grid: each cell's luminance ratio voxcone / path, row-major from the top.
+std::vector<double> regionRatiosAgainstPath(const Scene& scene) {
+  RenderSettings s = scene.render;
+  s.width = s.height = 64;
+  s.spp = 1024;
+  const Image path = renderWith(scene, "path", s).image;
+  s.spp = 64;
+  // The defaults but 16 gathers per gathering pixel: about 256 gathers per cell, so that a
+  // cell's mean shows the method's bias, not its noise.
+  const Image vc = renderWith(scene, "voxcone", s, {{"gathers", 16}}).image;
+  const auto lum = [](const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; };
+  std::vector<double> ratios;
+  for (const RegionError& c : regionErrors(vc, path, 4)) ratios.push_back(lum(c.meanTest) / lum(c.meanReference));
+  return ratios;
+}
+
+TEST(VoxelCone, EveryRegionOfCornellBoxMatchesConvergedPathButTheShortBlocksFront) {
+  // Measured: every cell within 8% of path (the top-right one, ceiling and green wall, -6%)
+  // but cell (2, 3), the short block's front: +30%. That face sees no light directly, and what
+  // it sees most of is the floor in front of it, which the block shadows; at level 6 the field's
+  // floor voxels and the photon footprints there mix that shadow with the lit floor beyond it,
+  // and the coarse mips mix it more. With the field's boundary on the walls it was +35% at
+  // 256x256 (now +20%).
+  const std::vector<double> r = regionRatiosAgainstPath(cornellBox());
+  for (size_t i = 0; i < r.size(); ++i) {
+    if (i == 14) continue;
+    EXPECT_NEAR(r[i], 1.0, 0.1) << "cell " << i % 4 << ", " << i / 4;
+  }
+  EXPECT_GT(r[14], 1.15);  // the failure, shown
+  EXPECT_LT(r[14], 1.4);
+}
+
+TEST(VoxelCone, EveryRegionOfAGlassBallSceneMatchesConvergedPath) {
+  // cornell-box with a glass ball for the short block: its caustic, its shadow and the room seen
+  // through it. Measured: within 8% but the bottom row (the floor around the ball and its
+  // shadow, -6% to -14%, the most beside the green wall): bounded at 15%.
+  const std::vector<double> r = regionRatiosAgainstPath(cornellGlassBall());
+  for (size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(r[i], 1.0, 0.15) << "cell " << i % 4 << ", " << i / 4;
 }
 
 /// A lit floor (4 x 4, albedo 0.8) and a square occluder (1 x 1, albedo 0.8) 0.5 above its

@@ -87,9 +87,10 @@
 /// Deterministic: the photon pass and the field are identical at any thread count, and li()
 /// draws only from the pixel's stream.
 
-#include "voxcone/integrator/cone_set.h"
 #include "voxcone/integrator/integrator.h"
-#include "voxcone/photon/photon_tracer.h"
+#include "voxcone/integrator/voxel_cone/cone_set.h"
+#include "voxcone/integrator/voxel_cone/cone_tracer.h"
+#include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/voxel/voxel_field.h"
 
 #include <optional>
@@ -102,10 +103,10 @@ public:
   std::string name() const override { return "voxcone"; }
   void prepare(Progress* progress) override;
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
-  int indirectFilterRadius() const override { return m_filterRadius; }
+  int indirectFilterRadius() const override { return m_settings.filterRadius; }
   Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
   Vec3 gatherDeferred(const DeferredGather& gather) const override;
-  int gatherSpacing() const override { return m_gatherSpacing; }
+  int gatherSpacing() const override { return m_settings.gatherSpacing; }
   /// Adjacent pixels on one surface are linked when an exact ray between their points, a
   /// quarter of a footprint above the surface, meets nothing.
   void linkIndirect(IndirectBuffer& buffer) const override;
@@ -114,50 +115,26 @@ public:
   nlohmann::json statsJson() const override;
 
 private:
-  /// Take the field prepare() built and the sizes the cones use from it.
-  void setField(VoxelField field);
-  /// The radiance one cone gathers from surface point p (unit normal n on the side the cone
-  /// leaves, unit direction d with dot(n, d) > 0 expected), half-angle atan(tanHalf).
-  Vec3 traceCone(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
-  /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
-  /// hit goes there instead (with the hit's position, normal and material).
+  using View = VoxelConeSettings::View;
   /// The cones' indirect light at a diffuse hit seen from woWorld, the cone set turned by 2 pi u.
   Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const;
+  /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
+  /// hit goes there instead (with the hit's position, normal and material).
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
   /// li, with the first hit's indirect light in `split` when it is given.
   Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
-  /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
-  /// the hit surface's normal turned towards the ray's side.
-  struct AxisHit {
-    float t = 0.0f;
-    Vec3 position{0.0f}, side{0.0f};
-  };
-  std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
-                                      float tMax) const;
 
   const Scene& m_scene;
   const Accel& m_accel;
-  int m_maxDepth;
-  PhotonSettings m_photonSettings;
-  VoxelSettings m_voxelSettings;
+  VoxelConeSettings m_settings;
   ConeSet m_cones;
   float m_tanHalf = 0.0f;       ///< tan of the cones' half-angle
-  float m_coneStep = 1.0f;
-  float m_maxDistance = 0.0f;
-  int m_lightSamples = 1;
-  int m_gathers = 0;            ///< pixel samples that gather indirect light (0: all)
-  int m_filterRadius = 0;       ///< screen-space indirect filter radius, pixels (0: off)
-  int m_gatherSpacing = 1;      ///< one gathering pixel per spacing x spacing block (renderImage)
-  float m_exactSegment = 0.0f;  ///< finest voxels
-  bool m_hitGather = false;     ///< gather = "hit": one exact ray per cone, field filtered at the hit
-  enum class View { Full, Direct, Indirect, Caustic, Field } m_view = View::Full;
 
   VoxelField m_field;
-  bool m_prepared = false;
+  std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_v0 = 0.0f;            ///< finest voxel size
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (m_v0 without one)
-  int m_finest = 0, m_coarsest = 0;
-  Bounds3 m_fieldBounds;
+  int m_finest = 0;
   nlohmann::json m_stats = nlohmann::json::object();
 };
 

@@ -1,0 +1,58 @@
+#pragma once
+/// \file cone_tracer.h
+/// One cone marched through the voxel field's mips from a surface point, front to back, with an
+/// exact HBVH segment along its axis first (voxel_cone.h describes the method: the lookup size
+/// per step, the clearance of the own surface, linear occlusion, `exact_segment`, `gather`).
+
+#include "voxcone/core/bounds.h"
+#include "voxcone/core/math.h"
+
+#include <optional>
+
+namespace voxcone {
+
+class Accel;
+class Scene;
+class VoxelField;
+struct VoxelConeSettings;
+
+/// A trilinear lookup reaches 1 voxel from its centre, and a surface fills voxels whose centres
+/// lie within half a voxel diagonal of it: a lookup of voxel size v at height h above a plane
+/// does not see the plane when v <= h / kClearance.
+constexpr float kClearance = 1.0f + 0.8660254f;
+/// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
+constexpr float kOpaque = 0.99f;
+
+class ConeTracer {
+public:
+  /// Cones in `field` (levels built), exact segments against `accel` on `scene`'s triangles,
+  /// with `settings`' step, maximum distance, exact segment and gather mode. Holds references.
+  ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings);
+  /// The radiance one cone gathers from surface point p (rounding error pError, unit normal n
+  /// on the side the cone leaves, unit direction d; dot(n, d) <= 0 gathers nothing), half-angle
+  /// atan(tanHalf).
+  Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
+  float finestVoxel() const { return m_v0; }  ///< world units
+  int finestLevel() const { return m_finest; }
+
+private:
+  /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
+  /// the hit surface's normal turned towards the ray's side.
+  struct AxisHit {
+    float t = 0.0f;
+    Vec3 position{0.0f}, side{0.0f};
+  };
+  std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
+                                      float tMax) const;
+
+  const Scene& m_scene;
+  const Accel& m_accel;
+  const VoxelField& m_field;
+  float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
+  bool m_hitGather;
+  float m_v0 = 0.0f;  ///< finest voxel size
+  int m_finest = 0, m_coarsest = 0;
+  Bounds3 m_fieldBounds;
+};
+
+}  // namespace voxcone

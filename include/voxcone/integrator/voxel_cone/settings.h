@@ -1,0 +1,45 @@
+#pragma once
+/// \file settings.h
+/// voxcone's settings: what its options (`--options` JSON, voxel_cone.h lists them) set, with
+/// their defaults, read and checked in one place (Tungsten's per-integrator settings struct).
+
+#include "voxcone/photon/photon_tracer.h"
+#include "voxcone/scene/scene.h"
+#include "voxcone/voxel/voxel_field.h"
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+namespace voxcone {
+
+struct VoxelConeSettings {
+  /// One term of the image alone, for error studies (voxel_cone.h, `view`).
+  enum class View { Full, Direct, Indirect, Caustic, Field };
+  /// kViewNames[View]: the option's values.
+  static const std::vector<std::string>& viewNames();
+
+  int maxDepth = 16;            ///< longest specular chain (the render's max depth)
+  VoxelSettings voxel;          ///< level, coarsest level, caustic level, photon footprint
+  PhotonSettings photons;       ///< global and caustic photons, seed (render seed + `seed`)
+  int cones = 6;                ///< cones per gather, [1, 256]
+  double coneAngleDeg = 0.0;    ///< half-angle, degrees; 0: ConeSet's default for the count
+  float coneStep = 1.0f;        ///< march step in lookup voxels, [0.25, 4]
+  float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter
+  int lightSamples = 1;         ///< shadow rays per shading point
+  int gathers = 1;              ///< gathering samples per gathering pixel (0: every sample)
+  int filterRadius = 12;        ///< screen-space filter radius, pixels (0: off)
+  int gatherSpacing = 4;        ///< one gathering pixel per spacing x spacing block
+  float exactSegment = 32.0f;   ///< exact ray along each cone axis, finest voxels (0: off)
+  bool hitGather = false;       ///< gather = "hit" instead of "march"
+  View view = View::Full;
+
+  /// Read `options` for `scene` rendered with `render` (whose photon counts and seed are the
+  /// defaults' base); unknown keys and values out of range are SettingsErrors.
+  static VoxelConeSettings fromOptions(const nlohmann::json& options, const Scene& scene, const RenderSettings& render);
+  /// Every setting, as the options name them (cone_angle as given: 0 for the default).
+  nlohmann::json toJson() const;
+};
+
+}  // namespace voxcone

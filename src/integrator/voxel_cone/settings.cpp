@@ -1,0 +1,102 @@
+// voxcone's options: defaults, ranges and the measurements that chose them.
+
+#include "voxcone/integrator/voxel_cone/settings.h"
+
+#include "../options.h"
+#include "voxcone/core/error.h"
+
+#include <algorithm>
+#include <limits>
+
+namespace voxcone {
+
+namespace {
+/// Defaults chosen by time to error against path at 4096 spp (cornell-box, cornell-dragon and
+/// cornell-dragon-glass, 256x256, 2 threads; the README's "Where voxcone's time goes" has the
+/// figures): level 6 (level 5 is faster on cornell-box but loses 0.9 dB on the dragon, level 7
+/// costs 1.5x for +0.2 dB). Indirect light: one gathering pixel per 4x4 block, one gather there
+/// (its first sample), the filter of radius 12 filling the rest. Cornell-box at 4 spp (total s,
+/// dB): spacing 3 / 4 / 5 with filter 12 and 1 gather 0.21 / 0.17 / 0.17 s, 36.13 / 35.86 /
+/// 35.45 dB (2 gathers: +0.4-0.6 dB for +0.02-0.03 s); filter 8 / 10 / 12 at spacing 4: 35.22 /
+/// 35.64 / 35.86 dB in the same time; 3 spp 33.45 dB (direct light needs 4 stratified samples:
+/// 25.4 / 29.6 / 35.5 / 42.5 dB at 1 / 2 / 4 / 8 spp of it alone).
+constexpr int kDefaultLevel = 6;
+constexpr int kDefaultGathers = 1;
+constexpr int kDefaultFilterRadius = 12;
+constexpr int kDefaultGatherSpacing = 4;
+}  // namespace
+
+const std::vector<std::string>& VoxelConeSettings::viewNames() {
+  static const std::vector<std::string> names = {"full", "direct", "indirect", "caustic", "field"};
+  return names;
+}
+
+VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, const Scene& scene,
+                                                 const RenderSettings& render) {
+  VoxelConeSettings out;
+  OptionReader r(options, "voxcone");
+  constexpr int kMaxInt = std::numeric_limits<int>::max();
+  bool anyDelta = false;
+  for (const Material& m : scene.materials) anyDelta = anyDelta || m.isDelta();
+  out.maxDepth = render.maxDepth;
+
+  VoxelSettings& v = out.voxel;
+  v.level = r.integer("level", kDefaultLevel, 1, 12);
+  v.coarsestLevel = r.integer("coarsest_level", std::min(1, v.level), 0, v.level);
+  v.causticLevel = r.integer("caustic_level", anyDelta ? std::min(12, v.level + 1) : 0, 0, 12);
+  if (v.causticLevel != 0 && v.causticLevel < v.coarsestLevel)
+    throw SettingsError("voxcone.caustic_level: must be 0 or at least coarsest_level");
+  v.kernelSigmaVoxels = float(r.number("kernel_sigma", 0.75, 0.05, 16.0));
+
+  uint64_t photons, causticPhotons;
+  defaultPhotonCounts(render.photons, render.causticPhotons, kVoxconeDefaultPhotons, kVoxconeDefaultCausticPhotons,
+                      photons, causticPhotons);
+  PhotonSettings& p = out.photons;
+  p.photons = uint64_t(r.integer("photons", int(std::min<uint64_t>(photons, kMaxInt)), 0, kMaxInt));
+  p.causticPhotons = uint64_t(r.integer("caustic_photons", int(std::min<uint64_t>(causticPhotons, kMaxInt)), 0, kMaxInt));
+  p.seed = render.seed + uint64_t(r.integer("seed", 0, 0, kMaxInt));
+  p.maxDepth = std::max(1, render.maxDepth);
+  if (!anyDelta || v.causticLevel == 0) p.causticPhotons = 0;
+
+  out.cones = r.integer("cones", 6, 1, 256);
+  out.coneAngleDeg = r.number("cone_angle", 0.0, 0.0, 89.0);
+  out.coneStep = float(r.number("cone_step", 1.0, 0.25, 4.0));
+  const float sceneRadius = std::max(0.0f, scene.boundingSphere().radius);
+  out.maxDistance = float(r.number("max_distance", 2.0 * double(sceneRadius), 0.0, 1e30));
+  out.lightSamples = r.integer("light_samples", 1, 1, 1024);
+  out.gathers = r.integer("gathers", kDefaultGathers, 0, 1 << 24);
+  out.filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 64);
+  out.gatherSpacing = r.integer("gather_spacing", out.filterRadius > 0 ? kDefaultGatherSpacing : 1, 1, 16);
+  if (out.gatherSpacing > 1 && out.filterRadius == 0)
+    throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
+  out.exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
+  out.hitGather = r.choice("gather", {"march", "hit"}) == "hit";
+  const std::string view = r.choice("view", viewNames());
+  out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
+  r.finish();
+  return out;
+}
+
+nlohmann::json VoxelConeSettings::toJson() const {
+  return {{"max_depth", maxDepth},
+          {"level", voxel.level},
+          {"coarsest_level", voxel.coarsestLevel},
+          {"caustic_level", voxel.causticLevel},
+          {"kernel_sigma", voxel.kernelSigmaVoxels},
+          {"photons", photons.photons},
+          {"caustic_photons", photons.causticPhotons},
+          {"photon_seed", photons.seed},
+          {"cones", cones},
+          {"cone_angle", coneAngleDeg},
+          {"cone_step", coneStep},
+          {"max_distance", maxDistance},
+          {"light_samples", lightSamples},
+          {"gathers", gathers},
+          {"filter", filterRadius},
+          {"gather_spacing", gatherSpacing},
+          {"exact_segment", exactSegment},
+          {"gather", hitGather ? "hit" : "march"},
+          {"view", viewNames()[size_t(view)]}};
+}
+
+}  // namespace voxcone
