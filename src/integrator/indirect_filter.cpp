@@ -29,42 +29,15 @@ bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q) {
 namespace {
 bool isEstimated(const IndirectBuffer& in, size_t p) { return in.estimated.empty() || in.estimated[p]; }
 
-/// What the walks read of a pixel, in one place (the buffer's separate arrays cost a cache line
-/// each per step of the column pass).
-struct FilterPixel {
-  Vec3 position{0.0f};
-  float footprint = 0.0f;
-  Vec3 normal{0.0f};
-  uint32_t material = 0;
-  uint8_t filterable = 0, link = 3;
-};
-
-std::vector<FilterPixel> packPixels(const IndirectBuffer& in) {
-  std::vector<FilterPixel> out(size_t(in.width) * size_t(in.height));
-  tbb::parallel_for(size_t(0), out.size(), [&](size_t p) {
-    out[p] = {in.position[p], in.footprint[p], in.normal[p], in.material[p], in.filterable[p],
-              in.link.empty() ? uint8_t(3) : in.link[p]};
-  });
-  return out;
-}
-
-/// sameFilterSurface on packed pixels.
-bool samePacked(const FilterPixel& p, const FilterPixel& q) {
-  return q.filterable && q.material == p.material && glm::dot(p.normal, q.normal) >= kMinNormalCos &&
-         std::fabs(glm::dot(p.normal, q.position - p.position)) <= kPlaneFootprints * p.footprint;
-}
-
 /// Visits what filterable pixel p = (x, y) reaches along its row (bit 0) or column (bit 1):
 /// visit(q, d) for q at distance d = 1 .. radius on each side, walking outwards and stopping at
 /// the first neighbour that is not linked to the previous one (the link between two neighbours
-/// is stored on the left or upper one) or not on p's surface (sameFilterSurface). visit returns
-/// false to end the whole walk.
+/// is stored on the left or upper one) or not on p's surface (sameFilterSurface); visit(q, d,
+/// cosN) gets the normals' cosine too. visit returns false to end the whole walk.
 template <class Visit>
-void walk(const IndirectBuffer& in, const std::vector<FilterPixel>& px, int radius, int bit, size_t p, int x, int y,
-          Visit&& visit) {
+void walk(const IndirectBuffer& in, int radius, int bit, size_t p, int x, int y, Visit&& visit) {
   const size_t stride = bit == 0 ? 1 : size_t(in.width);
   const int pos = bit == 0 ? x : y, len = bit == 0 ? in.width : in.height;
-  const FilterPixel& centre = px[p];
   for (int dir = -1; dir <= 1; dir += 2) {
     size_t prev = p;
     for (int d = 1; d <= radius; ++d) {
@@ -72,8 +45,14 @@ void walk(const IndirectBuffer& in, const std::vector<FilterPixel>& px, int radi
       if (at < 0 || at >= len) break;
       const size_t q = dir > 0 ? prev + stride : prev - stride;
       const size_t holder = dir > 0 ? prev : q;
-      if (!((px[holder].link >> bit) & 1u) || !samePacked(centre, px[q])) break;
-      if (!visit(q, d)) return;
+      if (!(in.link.empty() || ((in.link[holder] >> bit) & 1u))) break;
+      // sameFilterSurface(in, p, q), keeping the normals' cosine for the weight.
+      if (!in.filterable[q] || in.material[q] != in.material[p]) break;
+      const float cosN = glm::dot(in.normal[p], in.normal[q]);
+      if (!(cosN >= kMinNormalCos) ||
+          !(std::fabs(glm::dot(in.normal[p], in.position[q] - in.position[p])) <= kPlaneFootprints * in.footprint[p]))
+        break;
+      if (!visit(q, d, cosN)) return;
       prev = q;
     }
   }
@@ -100,13 +79,12 @@ void forEachFilterable(const IndirectBuffer& in, F&& f) {
 /// dependence.
 void filterSums(const IndirectBuffer& in, int radius, std::vector<DVec3>& num, std::vector<double>& den) {
   const size_t n = size_t(in.width) * size_t(in.height);
-  const std::vector<FilterPixel> px = packPixels(in);
   // The window's edge at 2 sigma: the Gaussian has fallen to e^-2 there.
   const float sigma = 0.5f * float(radius);
   std::vector<float> gauss(size_t(radius) + 1);
   for (int d = 0; d <= radius; ++d) gauss[size_t(d)] = std::exp(-float(d * d) / (2.0f * sigma * sigma));
-  const auto cos8 = [&](size_t a, size_t b) {
-    const float c = glm::dot(px[a].normal, px[b].normal), c2 = c * c, c4 = c2 * c2;
+  const auto cos8 = [](float c) {
+    const float c2 = c * c, c4 = c2 * c2;
     return c4 * c4;
   };
   const auto pass = [&](const std::vector<DVec3>& srcNum, const std::vector<double>& srcDen, int bit,
@@ -116,8 +94,9 @@ void filterSums(const IndirectBuffer& in, int radius, std::vector<DVec3>& num, s
     forEachFilterable(in, [&](size_t p, int x, int y) {
       DVec3 sn = srcNum[p];
       double sd = srcDen[p];
-      walk(in, px, radius, bit, p, x, y, [&](size_t q, int d) {
-        const double wq = double(gauss[size_t(d)] * cos8(p, q));
+      walk(in, radius, bit, p, x, y, [&](size_t q, int d, float cosN) {
+        if (srcDen[q] == 0.0) return true;  // most of the row pass's sources: no estimate
+        const double wq = double(gauss[size_t(d)] * cos8(cosN));
         sn += wq * srcNum[q];
         sd += wq * srcDen[q];
         return true;
@@ -155,14 +134,13 @@ std::vector<uint8_t> unfilledPixels(const IndirectBuffer& in, int radius) {
   // filterSums' reach without its sums (its weights are positive, so den > 0 exactly where an
   // estimated pixel is reached): each walk ends at the first pixel that carries one.
   const size_t n = size_t(in.width) * size_t(in.height);
-  const std::vector<FilterPixel> px = radius > 0 ? packPixels(in) : std::vector<FilterPixel>();
   std::vector<uint8_t> row(n, 0u), reached(n, 0u);
   for (size_t p = 0; p < n; ++p) row[p] = in.filterable[p] && isEstimated(in, p);
   const auto pass = [&](const std::vector<uint8_t>& src, int bit, std::vector<uint8_t>& dst) {
     forEachFilterable(in, [&](size_t p, int x, int y) {
       bool found = src[p] != 0u;
       if (!found && radius > 0)
-        walk(in, px, radius, bit, p, x, y, [&](size_t q, int) {
+        walk(in, radius, bit, p, x, y, [&](size_t q, int, float) {
           found = src[q] != 0u;
           return !found;
         });

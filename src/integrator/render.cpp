@@ -79,14 +79,13 @@ bool gathersInBlock(int x, int y, int spacing, uint64_t seed) {
   return x % s == int(hash % uint64_t(s)) && y % s == int((hash >> 32) % uint64_t(s));
 }
 
-/// Run the deferred gathers of the pixels marked in `gathers` (in parallel, each on its own),
-/// and add each pixel's weighted gathers, in the list's order, to its indirect light.
+/// Run the deferred gathers `pending` (in parallel, each on its own), and add each pixel's
+/// weighted gathers, in the list's order, to its indirect light.
 /// Throws CancelledError when `progress` reports cancellation.
-void runGathers(const Integrator& integrator, const std::vector<PendingGather>& pending,
-                const std::vector<uint8_t>& gathers, int spp, IndirectBuffer& ib, uint64_t& invalid,
-                Progress* progress) {
+void runGathers(const Integrator& integrator, const std::vector<PendingGather>& pending, int spp, IndirectBuffer& ib,
+                uint64_t& invalid, Progress* progress) {
   std::vector<Vec3> value(pending.size(), Vec3(0.0f));
-  constexpr size_t kChunk = 256;
+  constexpr size_t kChunk = 64;
   const size_t chunks = (pending.size() + kChunk - 1) / kChunk;
   std::atomic<bool> cancelled{false};
   if (progress) progress->start("gather", chunks);
@@ -97,19 +96,20 @@ void runGathers(const Integrator& integrator, const std::vector<PendingGather>& 
       return;
     }
     for (size_t i = chunk * kChunk; i < std::min(pending.size(), (chunk + 1) * kChunk); ++i)
-      if (gathers[pending[i].pixel]) value[i] = pending[i].gather.weight * integrator.gatherDeferred(pending[i].gather);
+      value[i] = pending[i].gather.weight * integrator.gatherDeferred(pending[i].gather);
     if (progress) progress->advance(1);
   });
   if (cancelled) throw CancelledError();
   if (progress) progress->finish();
   std::vector<DVec3> sum(ib.indirect.size(), DVec3(0.0));
+  std::vector<uint8_t> touched(ib.indirect.size(), 0u);
   for (size_t i = 0; i < pending.size(); ++i) {
-    if (!gathers[pending[i].pixel]) continue;
+    touched[pending[i].pixel] = 1u;
     if (usableRadiance(value[i])) sum[pending[i].pixel] += DVec3(value[i]);
     else ++invalid;
   }
   for (size_t p = 0; p < sum.size(); ++p)
-    if (gathers[p]) ib.indirect[p] += Vec3(sum[p] / double(spp));
+    if (touched[p]) ib.indirect[p] += Vec3(sum[p] / double(spp));
 }
 }  // namespace
 
@@ -249,19 +249,23 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
       }
     result.stageSeconds["link"] = stage.seconds();
     stage.reset();
+    // The gathers to run, in tile order.
     std::vector<PendingGather> pending;
-    for (const std::vector<PendingGather>& t : tilePending) pending.insert(pending.end(), t.begin(), t.end());
-    tilePending = {};
-    uint64_t filterable = 0, gathering = 0, gathersRun = 0;
+    for (std::vector<PendingGather>& t : tilePending) {
+      for (const PendingGather& g : t)
+        if (gathers[g.pixel]) pending.push_back(g);
+      std::vector<PendingGather>().swap(t);
+    }
+    uint64_t filterable = 0, gathering = 0;
     for (size_t p = 0; p < gathers.size(); ++p) {
       filterable += ib.filterable[p];
       gathering += gathers[p];
     }
-    for (const PendingGather& g : pending) gathersRun += gathers[g.pixel];
+    const uint64_t gathersRun = pending.size();
     result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", unfilledCount},
                           {"borrowing", borrowing}, {"gathers", gathersRun}};
     uint64_t bad = 0;
-    runGathers(integrator, pending, gathers, settings.spp, ib, bad, progress);
+    runGathers(integrator, pending, settings.spp, ib, bad, progress);
     invalid += bad;
     result.stageSeconds["gather"] = stage.seconds();
     stage.reset();
