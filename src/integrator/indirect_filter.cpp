@@ -30,10 +30,10 @@ namespace {
 bool isEstimated(const IndirectBuffer& in, size_t p) { return in.estimated.empty() || in.estimated[p]; }
 
 /// Visits what filterable pixel p = (x, y) reaches along its row (bit 0) or column (bit 1):
-/// visit(q, d) for q at distance d = 1 .. radius on each side, walking outwards and stopping at
-/// the first neighbour that is not linked to the previous one (the link between two neighbours
-/// is stored on the left or upper one) or not on p's surface (sameFilterSurface); visit(q, d,
-/// cosN) gets the normals' cosine too. visit returns false to end the whole walk.
+/// visit(q, d, cosN) for q at distance d = 1 .. radius on each side (cosN: the normals'
+/// cosine), walking outwards and stopping at the first neighbour that is not linked to the
+/// previous one (the link between two neighbours is stored on the left or upper one) or not on
+/// p's surface (sameFilterSurface). visit returns false to end the whole walk.
 template <class Visit>
 void walk(const IndirectBuffer& in, int radius, int bit, size_t p, int x, int y, Visit&& visit) {
   const size_t stride = bit == 0 ? 1 : size_t(in.width);

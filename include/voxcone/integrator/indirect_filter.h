@@ -45,9 +45,10 @@ bool onFilterSurface(const IndirectBuffer& in, size_t p, const Vec3& position, c
 
 /// The filtered indirect light of every pixel: filterable pixels take the weighted mean of the
 /// estimated filterable pixels within `radius` (pixels) that pass the surface tests and are
-/// reachable through links inside the window, with Gaussian weights of standard deviation
-/// radius / 2 in the image times the cosine of the normals to the eighth power; the others, and
-/// any that reach no estimated pixel, keep their own value. Deterministic (no order dependence).
+/// reachable along the pixel's row and then a column, through links (separable: a row pass,
+/// then a column pass over its sums), with Gaussian weights of standard deviation radius / 2 in
+/// the image times the cosine of the normals to the eighth power; the others, and any that
+/// reach no estimated pixel, keep their own value. Deterministic (no order dependence).
 std::vector<Vec3> filterIndirect(const IndirectBuffer& in, int radius);
 
 /// The filterable pixels that filterIndirect cannot fill: no estimated pixel (themselves

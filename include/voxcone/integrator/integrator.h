@@ -119,12 +119,15 @@ struct RenderResult {
 /// its first slot the jitter, so the image is bit-identical at any thread count.
 /// Box pixel filter: each sample is uniform in the pixel's square. With an indirect filter
 /// radius, each pixel's indirect light (liSplit) is replaced by its neighbours' weighted mean
-/// where all its samples saw one surface (filterIndirect, deterministic). Deferred gathers
+/// where all its samples saw one surface (filterIndirect, deterministic). A pixel whose
+/// samples saw several surfaces (an edge) takes, per sample, the filtered light of the nearest
+/// filter pixel within 2 pixels on that sample's surface that its point sees
+/// (Integrator::linkedPoints), when every one of its samples finds one. Deferred gathers
 /// (IndirectSplit::deferred) run after every pixel's samples, at one pixel per
-/// gatherSpacing() block (chosen per block from the seed), at every pixel the filter does not
-/// take (edges, several surfaces) and at every pixel with no such gathering pixel among its
-/// filter neighbours; the filter then fills the others from their neighbours. Throws
-/// CancelledError when `progress` reports cancellation.
+/// gatherSpacing() block (chosen per block from the seed), at every edge pixel that cannot take
+/// its light that way, and at every pixel with no gathering pixel among its filter
+/// neighbours; the filter then fills the others from their neighbours. Throws CancelledError
+/// when `progress` reports cancellation.
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                          Progress* progress = nullptr);
 

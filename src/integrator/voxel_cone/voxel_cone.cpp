@@ -14,7 +14,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 namespace voxcone {
 
@@ -85,7 +84,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
                                  IndirectSplit* split) const {
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
-  // cones' apex in traceCone).
+  // cones' apex in ConeTracer::trace).
   const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kClearance * voxel); };
   if (m_settings.view == View::Field)
     return m_field.coneSample(sh.position, float(m_finest), -woWorld, viewFrom(woWorld, m_v0)).radiance;
@@ -95,9 +94,9 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   if (m_settings.view == View::Direct) return L;
   // Cones on the pixel's first `gathers` samples only, weighted to keep the pixel's mean.
   float gatherWeight = 1.0f;
-  if (m_settings.gathers > 0 && sampler.samplesPerPixel() > uint32_t(m_settings.gathers))
-    gatherWeight = sampler.sampleIndex() < uint32_t(m_settings.gathers) ? float(sampler.samplesPerPixel()) / float(m_settings.gathers)
-                                                               : 0.0f;
+  const uint32_t gathers = uint32_t(m_settings.gathers);
+  if (gathers > 0 && sampler.samplesPerPixel() > gathers)
+    gatherWeight = sampler.sampleIndex() < gathers ? float(sampler.samplesPerPixel()) / float(gathers) : 0.0f;
   // The side of the surface the viewer is on.
   const bool front = glm::dot(sh.geomNormal, woWorld) >= 0.0f;
   const Vec3 ng = front ? sh.geomNormal : -sh.geomNormal;

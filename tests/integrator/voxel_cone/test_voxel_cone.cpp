@@ -72,15 +72,22 @@ TEST(VoxelCone, PointLightFurnaceGivesOne) {
   }
 }
 
-TEST(VoxelCone, ThinWallLeakIsMeasuredAndExactSegmentsCutIt) {
-  // Two rooms split by a wall 0.01 thick (a level-5 voxel is 0.0625): the point light is in the
-  // left room, the front is open to nothing, so the right room's true radiance is exactly 0.
-  // The camera sees the right room (x > 1) in the left half of the image.
-  const Scene scene = loadScene(test::sourceDir() + "/data/scenes/thin-wall.json");
-  RenderSettings s = scene.render;
+/// The thin-wall scene: two rooms split by a wall 0.01 thick (a level-5 voxel is 0.0625), the
+/// point light in the left room, the front open to nothing, so the right room's true radiance
+/// is exactly 0. The camera sees the right room (x > 1) in the left half of the image and the
+/// wall edge-on at its centre. `s`: 32x16 at 4 spp.
+Scene thinWall(RenderSettings& s) {
+  Scene scene = loadScene(test::sourceDir() + "/data/scenes/thin-wall.json");
+  s = scene.render;
   s.width = 32;
   s.height = 16;
   s.spp = 4;
+  return scene;
+}
+
+TEST(VoxelCone, ThinWallLeakIsMeasuredAndExactSegmentsCutIt) {
+  RenderSettings s;
+  const Scene scene = thinWall(s);
   const Image path = renderWith(scene, "path", s).image;
   EXPECT_EQ(imageMean(path, 0, 15).x, 0.0f);  // no light path reaches the right room
   auto leak = [&](double segment) {
@@ -110,11 +117,8 @@ TEST(VoxelCone, TheFilterAndItsBorrowingPixelsDoNotCarryLightThroughAThinWall) {
   // filter pixels nearby (renderImage), and the filter's rows cross the wall. Through exact
   // links neither reaches the lit room: the dark room's columns, and the column next to the
   // wall alone, stay about as dark as without the filter.
-  const Scene scene = loadScene(test::sourceDir() + "/data/scenes/thin-wall.json");
-  RenderSettings s = scene.render;
-  s.width = 32;
-  s.height = 16;
-  s.spp = 4;
+  RenderSettings s;
+  const Scene scene = thinWall(s);
   // Path: exactly 0 in columns 0-15. Measured without the filter: the dark room 0.5% of the lit
   // one, column 15 (the wall's dark side) 3.5%; with filter 8 and one gathering pixel per 4x4
   // block: 0.5% and 1.2%. With the links' rays left out (every pair linked): 13% and 50%.
