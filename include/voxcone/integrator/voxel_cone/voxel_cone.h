@@ -70,10 +70,10 @@
 ///    neighbours' indirect light on the same material, normal and plane; a pixel whose samples
 ///    saw several surfaces takes, per sample, the filtered light of a filter pixel nearby on that
 ///    sample's surface (or gathers itself where there is none);
-///  - `gather_spacing` [1, 16] (default 4 with the filter, 1 without; above 1 only with it): one pixel per
-///    spacing x spacing block gathers (the cones wait until every pixel's samples are taken,
-///    liSplit's DeferredGather); the filter fills the others, and any pixel it cannot fill
-///    gathers itself;
+///  - `gather_spacing` [1, 16] (default 4 with the filter, 1 without; above 1 only with it): one
+///    pixel per spacing x spacing block gathers (the cones wait until every pixel's samples are
+///    taken, liSplit's DeferredGather); the filter fills the others, and any pixel it cannot
+///    fill gathers itself;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
 ///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
 ///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
