@@ -13,14 +13,18 @@ namespace voxcone {
 namespace {
 /// Defaults chosen by time to error against path at 4096 spp (cornell-box, cornell-dragon and
 /// cornell-dragon-glass, 256x256, 2 threads; the README's "Where voxcone's time goes" has the
-/// figures): level 6 (level 5 is faster on cornell-box but loses 0.9 dB on the dragon, level 7
-/// costs 1.5x for +0.2 dB). Indirect light: one gathering pixel per 4x4 block, one gather there
+/// figures). Level 5: with 10k photons a finer level has fewer photons per voxel. At 4 spp level
+/// 5 / 6 give cornell-box 35.87 / 35.86 dB in 0.11 / 0.13 s, cornell-dragon 36.13 / 35.69 dB, the
+/// glass dragon 31.78 / 30.94 dB (2 spp: 29.73 / 29.09 dB); study levels (dragon, 16 spp) 38.65 /
+/// 37.92 / 36.90 / 35.40 dB at levels 5 / 6 / 7 / 8; only converged cornell-box prefers 6 (64
+/// spp: 38.97 / 39.07 dB). (With 100k photons and cones on every sample level 6 was best: the
+/// dragon lost 0.9 dB at level 5.) Indirect light: one gathering pixel per 4x4 block, one gather there
 /// (its first sample), the filter of radius 12 filling the rest. Cornell-box at 4 spp (total s,
 /// dB): spacing 3 / 4 / 5 with filter 12 and 1 gather 0.21 / 0.17 / 0.17 s, 36.13 / 35.86 /
 /// 35.45 dB (2 gathers: +0.4-0.6 dB for +0.02-0.03 s); filter 8 / 10 / 12 at spacing 4: 35.22 /
 /// 35.64 / 35.86 dB in the same time; 3 spp 33.45 dB (direct light needs 4 stratified samples:
 /// 25.4 / 29.6 / 35.5 / 42.5 dB at 1 / 2 / 4 / 8 spp of it alone).
-constexpr int kDefaultLevel = 6;
+constexpr int kDefaultLevel = 5;
 constexpr int kDefaultGathers = 1;
 constexpr int kDefaultFilterRadius = 12;
 constexpr int kDefaultGatherSpacing = 4;

@@ -48,7 +48,7 @@
 /// left comes from coarse voxels that hold both rooms' walls: measured in the tests.
 ///
 /// Options (unknown keys are SettingsErrors):
-///  - `level` [1, 12] (default 6), `coarsest_level` [0, level] (default 1);
+///  - `level` [1, 12] (default 5), `coarsest_level` [0, level] (default 1);
 ///  - `photons`, `caustic_photons` (default the scene's render.photons / caustic_photons, else
 ///    kVoxconeDefaultPhotons (10k) and kVoxconeDefaultCausticPhotons (20k)),
 ///    `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
