@@ -23,6 +23,7 @@ constexpr float kClearance = 1.0f + 0.8660254f;
 /// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
 constexpr float kOpaque = 0.99f;
 
+/// Traces cones through one voxel field (immutable; trace() is called concurrently).
 class ConeTracer {
 public:
   /// Cones in `field` (levels built), exact segments against `accel` on `scene`'s triangles,

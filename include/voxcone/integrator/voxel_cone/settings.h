@@ -14,10 +14,11 @@
 
 namespace voxcone {
 
+/// Every option of the voxcone integrator, resolved (defaults applied, ranges checked).
 struct VoxelConeSettings {
   /// One term of the image alone, for error studies (voxel_cone.h, `view`).
   enum class View { Full, Direct, Indirect, Caustic, Field };
-  /// kViewNames[View]: the option's values.
+  /// The `view` option's values, indexed by View.
   static const std::vector<std::string>& viewNames();
 
   int maxDepth = 16;            ///< longest specular chain (the render's max depth)
