@@ -94,4 +94,53 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   return true;
 }
 
+bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, const Sphere& target,
+                                 EmittedPhoton& out) const {
+  if (m_cdf.empty()) return false;
+  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_cdf.begin(), m_cdf.end(), uLight) - m_cdf.begin()),
+                              m_cdf.size() - 1);
+  const Light& light = m_lights[idx];
+  // The emitting point (as sample()).
+  Vec3 p, pError(0.0f), n(0.0f);
+  if (light.pointLight >= 0) {
+    p = m_scene.pointLights[static_cast<size_t>(light.pointLight)].position;
+  } else {
+    const UVec3& tri = m_scene.triangles[light.triangle];
+    const Vec3& p0 = m_scene.positions[tri.x];
+    const Vec3& p1 = m_scene.positions[tri.y];
+    const Vec3& p2 = m_scene.positions[tri.z];
+    const Vec2 b = sampleUniformTriangle(uPos);
+    p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
+    n = glm::normalize(glm::cross(p1 - p0, p2 - p0));
+  }
+  const Vec3 toCentre = target.center - p;
+  const float dist = glm::length(toCentre);
+  if (!(target.radius >= 0.0f) || !(dist > target.radius)) return sample(uLight, uSide, uPos, uDir, out);
+  // Uniform in the cone of half-angle asin(R / d): pdf 1 / (2 pi (1 - cos max)).
+  const double cosMax = std::sqrt(std::max(0.0, 1.0 - sqr(double(target.radius) / double(dist))));
+  const double solidAngle = 2.0 * double(kPi) * (1.0 - cosMax);
+  const double cosT = 1.0 - double(uDir.x) * (1.0 - cosMax);
+  const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
+  const double phi = 2.0 * double(kPi) * double(uDir.y);
+  const Vec3 dir = glm::normalize(Frame(toCentre / dist)
+                                      .toWorld(Vec3(float(sinT * std::cos(phi)), float(sinT * std::sin(phi)), float(cosT))));
+  if (!isFinite(dir) || !isFinite(p)) return false;
+  if (light.pointLight >= 0) {
+    // Intensity I = flux / (4 pi) into the cone's solid angle.
+    out.fluxWatts = light.fluxWatts / (4.0 * double(kPi)) * solidAngle / m_pmf[idx];
+    out.ray = Ray();
+    out.ray.origin = p;
+    out.ray.dir = dir;
+    return true;
+  }
+  // Le A (per side) = flux / (pi sides); the photon carries Le A |cos| / pdf(direction). A
+  // two-sided emitter emits the direction from the side it leaves.
+  const float cosL = glm::dot(n, dir);
+  if (!light.twoSided && !(cosL > 0.0f)) return false;
+  const double sides = light.twoSided ? 2.0 : 1.0;
+  out.fluxWatts = light.fluxWatts / (double(kPi) * sides) * double(std::fabs(cosL)) * solidAngle / m_pmf[idx];
+  out.ray = spawnRay(p, pError, cosL >= 0.0f ? n : -n, dir);
+  return true;
+}
+
 }  // namespace voxcone

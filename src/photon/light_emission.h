@@ -6,6 +6,7 @@
 /// (every emissive triangle and every point light is one light, chosen in proportion to the
 /// luminance of its flux).
 
+#include "voxcone/core/bounds.h"
 #include "voxcone/core/math.h"
 #include "voxcone/core/ray.h"
 
@@ -46,6 +47,13 @@ public:
   /// two-sided emitter, uPos in [0,1)^2 the point on a triangle, uDir in [0,1)^2 the direction.
   /// Returns false when nothing is emitted (no lights).
   bool sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const;
+  /// The same light and point, but the direction uniform in the cone from that point towards
+  /// `target` (a sphere), the flux weighted by the cone's solid angle over the emitted
+  /// cosine: unbiased for every path whose first hit lies in the sphere. From a point inside
+  /// the sphere, sample()'s direction. Returns false also when the direction leaves a one-sided
+  /// emitter's back (the photon carries nothing).
+  bool sampleToward(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, const Sphere& target,
+                    EmittedPhoton& out) const;
 
 private:
   struct Light {

@@ -42,7 +42,7 @@ enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 /// Trace photon `index` of `pass` and append what it stores to `out`. `powerScale` is one over
 /// the photons emitted in the pass, so that each pass carries the lights' full flux.
 void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
-                 Pass pass, uint64_t index, double powerScale, std::vector<Photon>& out) {
+                 Pass pass, uint64_t index, double powerScale, const Sphere& aim, std::vector<Photon>& out) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
 
@@ -52,7 +52,9 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
   const float uSide = rng.uniform();
   const Vec2 uPos = rng.uniform2();
   const Vec2 uDir = rng.uniform2();
-  if (!lights.sample(uLight, uSide, uPos, uDir, e)) return;
+  const bool aimed = pass == Pass::Caustic && aim.radius >= 0.0f;
+  if (!(aimed ? lights.sampleToward(uLight, uSide, uPos, uDir, aim, e) : lights.sample(uLight, uSide, uPos, uDir, e)))
+    return;
   Vec3 power = Vec3(e.fluxWatts * powerScale);
   if (!isFinite(power) || !(maxComponent(power) > 0.0f)) return;
   Ray ray = e.ray;
@@ -126,6 +128,19 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   Progress& prog = progress ? *progress : nullProgress;
   PhotonMaps maps;
   const LightEmission lights(scene);
+  // Where caustic photons are aimed: the bounding sphere of the delta triangles (none: not aimed).
+  Sphere aim;
+  if (settings.aimCaustics) {
+    Bounds3 specular;
+    for (size_t t = 0; t < scene.triangles.size(); ++t)
+      if (scene.materials[scene.triMaterial[t]].isDelta())
+        for (uint32_t v : {scene.triangles[t].x, scene.triangles[t].y, scene.triangles[t].z}) specular.extend(scene.positions[v]);
+    if (!specular.empty()) {
+      aim.center = 0.5f * (specular.lo + specular.hi);
+      // Half the diagonal, a little more so that rounding never cuts off a corner.
+      aim.radius = 0.5f * glm::length(specular.hi - specular.lo) * (1.0f + 1e-4f) + 1e-30f;
+    }
+  }
 
   // Nothing is emitted without a light: both maps stay empty.
   const uint64_t counts[2] = {lights.empty() ? 0 : settings.photons, lights.empty() ? 0 : settings.causticPhotons};
@@ -148,7 +163,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
       const uint64_t last = std::min(counts[p], first + kBlockSize);
       const double powerScale = 1.0 / double(counts[p]);
       std::vector<Photon>& out = perBlock[b];
-      for (uint64_t i = first; i < last; ++i) tracePhoton(scene, accel, lights, settings, pass, i, powerScale, out);
+      for (uint64_t i = first; i < last; ++i) tracePhoton(scene, accel, lights, settings, pass, i, powerScale, aim, out);
       prog.advance(last - first);
     }
   });

@@ -58,6 +58,11 @@ struct PhotonSettings {
   uint64_t causticPhotons = 100000; ///< photons emitted for the caustic map (0: none)
   int maxDepth = 16;                ///< longest photon path (segments)
   uint64_t seed = 0;                ///< photon i of pass p uses the stream (seed, p * 2^40 + i)
+  /// Caustic photons leave the lights only towards the bounding sphere of the specular (delta)
+  /// triangles, weighted by that cone's solid angle (Jensen's projection maps, with a sphere for
+  /// the map): an L S+ D path must meet a specular surface first, so nothing is lost, and far
+  /// more of the pass's photons become caustics.
+  bool aimCaustics = true;
 };
 
 /// Statistics of one tracing run.
