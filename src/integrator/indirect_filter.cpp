@@ -17,9 +17,21 @@ constexpr float kMinNormalCos = 0.9f;
 constexpr float kPlaneFootprints = 2.0f;
 }  // namespace
 
+namespace {
+/// The normals' cosine when a point (position, unit normal, material) lies on filterable pixel
+/// p's surface by the filter's tests, else -2.
+float cosOnSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material) {
+  if (!in.filterable[p] || material != in.material[p]) return -2.0f;
+  const float c = glm::dot(in.normal[p], normal);
+  if (!(c >= kMinNormalCos) ||
+      !(std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p]))
+    return -2.0f;
+  return c;
+}
+}  // namespace
+
 bool onFilterSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material) {
-  return in.filterable[p] && material == in.material[p] && glm::dot(in.normal[p], normal) >= kMinNormalCos &&
-         std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p];
+  return cosOnSurface(in, p, position, normal, material) >= kMinNormalCos;
 }
 
 bool sameFilterSurface(const IndirectBuffer& in, size_t p, size_t q) {
@@ -45,13 +57,10 @@ void walk(const IndirectBuffer& in, int radius, int bit, size_t p, int x, int y,
       if (at < 0 || at >= len) break;
       const size_t q = dir > 0 ? prev + stride : prev - stride;
       const size_t holder = dir > 0 ? prev : q;
-      if (!(in.link.empty() || ((in.link[holder] >> bit) & 1u))) break;
+      if (!(in.link.empty() || ((in.link[holder] >> bit) & 1u)) || !in.filterable[q]) break;
       // sameFilterSurface(in, p, q), keeping the normals' cosine for the weight.
-      if (!in.filterable[q] || in.material[q] != in.material[p]) break;
-      const float cosN = glm::dot(in.normal[p], in.normal[q]);
-      if (!(cosN >= kMinNormalCos) ||
-          !(std::fabs(glm::dot(in.normal[p], in.position[q] - in.position[p])) <= kPlaneFootprints * in.footprint[p]))
-        break;
+      const float cosN = cosOnSurface(in, p, in.position[q], in.normal[q], in.material[q]);
+      if (!(cosN >= kMinNormalCos)) break;
       if (!visit(q, d, cosN)) return;
       prev = q;
     }

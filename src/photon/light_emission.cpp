@@ -57,11 +57,26 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene) {
   m_cdf.back() = 1.0;
 }
 
+size_t LightEmission::choose(double uLight) const {
+  // By power: binary search in the CDF.
+  return std::min(static_cast<size_t>(std::upper_bound(m_cdf.begin(), m_cdf.end(), uLight) - m_cdf.begin()),
+                  m_cdf.size() - 1);
+}
+
+Vec3 LightEmission::pointOn(const Light& light, const Vec2& uPos, Vec3& pError, Vec3& frontNormal) const {
+  const UVec3& tri = m_scene.triangles[light.triangle];
+  const Vec3& p0 = m_scene.positions[tri.x];
+  const Vec3& p1 = m_scene.positions[tri.y];
+  const Vec3& p2 = m_scene.positions[tri.z];
+  const Vec2 b = sampleUniformTriangle(uPos);
+  // The geometric normal from the winding is the front side (Scene::emitted).
+  frontNormal = glm::normalize(glm::cross(p1 - p0, p2 - p0));
+  return barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
+}
+
 bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const {
   if (m_cdf.empty()) return false;
-  // Choose a light by power (binary search in the CDF).
-  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_cdf.begin(), m_cdf.end(), uLight) - m_cdf.begin()),
-                              m_cdf.size() - 1);
+  const size_t idx = choose(uLight);
   const Light& light = m_lights[idx];
   // Flux / pmf: the one-sample estimate of the total flux (its mean over the choice is exact
   // per channel even when the lights differ in colour).
@@ -78,15 +93,8 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   // Emissive triangle: uniform point, cosine-weighted direction on the emitting side. The
   // density (1/A) (cos/pi) (1/sides) against Le cos makes the weight exactly the flux
   // pi Le A sides, already in fluxWatts.
-  const UVec3& tri = m_scene.triangles[light.triangle];
-  const Vec3& p0 = m_scene.positions[tri.x];
-  const Vec3& p1 = m_scene.positions[tri.y];
-  const Vec3& p2 = m_scene.positions[tri.z];
-  const Vec2 b = sampleUniformTriangle(uPos);
-  Vec3 pError;
-  const Vec3 p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
-  // The geometric normal from the winding is the front side (Scene::emitted).
-  Vec3 n = glm::normalize(glm::cross(p1 - p0, p2 - p0));
+  Vec3 pError, n;
+  const Vec3 p = pointOn(light, uPos, pError, n);
   if (light.twoSided && uSide < 0.5f) n = -n;
   const Vec3 dir = glm::normalize(Frame(n).toWorld(sampleCosineHemisphere(uDir)));
   if (!isFinite(dir) || !isFinite(p)) return false;
@@ -97,22 +105,12 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
 bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, const Sphere& target,
                                  EmittedPhoton& out) const {
   if (m_cdf.empty()) return false;
-  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_cdf.begin(), m_cdf.end(), uLight) - m_cdf.begin()),
-                              m_cdf.size() - 1);
+  const size_t idx = choose(uLight);
   const Light& light = m_lights[idx];
   // The emitting point (as sample()).
-  Vec3 p, pError(0.0f), n(0.0f);
-  if (light.pointLight >= 0) {
-    p = m_scene.pointLights[static_cast<size_t>(light.pointLight)].position;
-  } else {
-    const UVec3& tri = m_scene.triangles[light.triangle];
-    const Vec3& p0 = m_scene.positions[tri.x];
-    const Vec3& p1 = m_scene.positions[tri.y];
-    const Vec3& p2 = m_scene.positions[tri.z];
-    const Vec2 b = sampleUniformTriangle(uPos);
-    p = barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
-    n = glm::normalize(glm::cross(p1 - p0, p2 - p0));
-  }
+  Vec3 pError(0.0f), n(0.0f);
+  const Vec3 p = light.pointLight >= 0 ? m_scene.pointLights[static_cast<size_t>(light.pointLight)].position
+                                       : pointOn(light, uPos, pError, n);
   const Vec3 toCentre = target.center - p;
   const float dist = glm::length(toCentre);
   if (!(target.radius >= 0.0f) || !(dist > target.radius)) return sample(uLight, uSide, uPos, uDir, out);

@@ -62,6 +62,12 @@ private:
     DVec3 fluxWatts{0.0};
     bool twoSided = false;
   };
+  /// The light uLight in [0,1) chooses, by power.
+  size_t choose(double uLight) const;
+  /// A uniform point on emissive triangle `light` (its rounding bound in pError) and the
+  /// triangle's front (winding) normal.
+  Vec3 pointOn(const Light& light, const Vec2& uPos, Vec3& pError, Vec3& frontNormal) const;
+
   const Scene& m_scene;
   std::vector<Light> m_lights;
   std::vector<double> m_cdf;   ///< cumulative choice probability, the last entry exactly 1

@@ -192,11 +192,6 @@ struct Level {
   Vec3 radianceAt(size_t v) const {
     return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]) + decodeRgb9e5(radianceBack[v]);
   }
-  /// Radiance of the side of voxel v's surface that a ray of direction d sees.
-  Vec3 radianceSeenAlong(size_t v, const Vec3& d) const {
-    if (radiance.empty()) return Vec3(0.0f);
-    return decodeRgb9e5(glm::dot(decodeNormalDirection(normal[v]), d) <= 0.0f ? radiance[v] : radianceBack[v]);
-  }
   Vec3 normalAt(size_t v) const { return decodeNormal(normal[v]); }
   Vec3 axisFractionAt(size_t v) const {
     if (axisFraction.empty()) return glm::abs(normalAt(v));
@@ -229,16 +224,22 @@ struct Level {
     for (size_t v = 0; v < back.size(); ++v) radianceBack[v] = encodeRgb9e5(back[v]);
   }
 
+  /// Voxel v's cone-lookup attributes, decoded (coneTable's entry where there is one).
+  ConeVoxel coneVoxel(size_t v) const {
+    if (!coneTable.empty()) return coneTable[v];
+    ConeVoxel c;
+    c.projected = opacity(v) * axisFractionAt(v);
+    c.side = decodeNormalDirection(normal[v]);
+    c.front = radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
+    c.back = radianceBack.empty() ? Vec3(0.0f) : decodeRgb9e5(radianceBack[v]);
+    return c;
+  }
   /// Decode every voxel's cone-lookup attributes into coneTable.
   void buildConeTable() {
-    coneTable.resize(size());
-    for (size_t v = 0; v < size(); ++v) {
-      ConeVoxel& c = coneTable[v];
-      c.projected = opacity(v) * axisFractionAt(v);
-      c.side = decodeNormalDirection(normal[v]);
-      c.front = radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
-      c.back = radianceBack.empty() ? Vec3(0.0f) : decodeRgb9e5(radianceBack[v]);
-    }
+    coneTable.clear();
+    std::vector<ConeVoxel> table(size());
+    for (size_t v = 0; v < size(); ++v) table[v] = coneVoxel(v);
+    coneTable = std::move(table);
   }
 
   uint64_t topologyBytes() const {
@@ -443,18 +444,11 @@ void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec
     // (the direction from the apex, not the axis: a lookup's reach takes in surfaces beside
     // the axis, and a ray from the apex reaches them from their apex side).
     const Vec3 centre = (Vec3(float(i), float(j), float(k)) + Vec3(0.5f)) * lv.voxelSizeF;
-    if (!lv.coneTable.empty()) {
-      const ConeVoxel& cv = lv.coneTable[v];
-      const Vec3 proj = cv.projected * absD;
-      const float area = w * (proj.x + proj.y + proj.z);
-      density += area;
-      radiance += area * (glm::dot(cv.side, centre - localApex) <= 0.0f ? cv.front : cv.back);
-      continue;
-    }
-    const Vec3 proj = (w * lv.opacity(v)) * lv.axisFractionAt(v) * absD;
-    const float area = proj.x + proj.y + proj.z;
+    const ConeVoxel cv = lv.coneVoxel(v);
+    const Vec3 proj = cv.projected * absD;
+    const float area = w * (proj.x + proj.y + proj.z);
     density += area;
-    radiance += area * lv.radianceSeenAlong(v, centre - localApex);
+    radiance += area * (glm::dot(cv.side, centre - localApex) <= 0.0f ? cv.front : cv.back);
   }
 }
 

@@ -51,10 +51,8 @@ void VoxelConeIntegrator::prepare(Progress* progress) {
   m_stats["prepare_seconds"] = total.seconds();
   m_field = std::move(field);
   m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
-  m_finest = m_tracer->finestLevel();
-  m_v0 = m_tracer->finestVoxel();
   const int causticLevel = m_field.settings().causticLevel;
-  m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_v0;
+  m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
 }
 
 Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const {
@@ -87,7 +85,9 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   // cones' apex in ConeTracer::trace).
   const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kClearance * voxel); };
   if (m_settings.view == View::Field)
-    return m_field.coneSample(sh.position, float(m_finest), -woWorld, viewFrom(woWorld, m_v0)).radiance;
+    return m_field
+        .coneSample(sh.position, float(m_tracer->finestLevel()), -woWorld, viewFrom(woWorld, m_tracer->finestVoxel()))
+        .radiance;
   Vec3 L(0.0f);
   if (m_settings.view == View::Full || m_settings.view == View::Direct)
     L += estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples);

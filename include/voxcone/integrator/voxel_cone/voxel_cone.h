@@ -132,9 +132,7 @@ private:
 
   VoxelField m_field;
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
-  float m_v0 = 0.0f;            ///< finest voxel size
-  float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (m_v0 without one)
-  int m_finest = 0;
+  float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
   nlohmann::json m_stats = nlohmann::json::object();
 };
 
