@@ -76,11 +76,14 @@ TEST(AutoSettings, TighterTargetsCostMoreAndFixedSettingsAreKept) {
   tight.targetRelMse = 0.005;
   const AutoSettingsResult l = p.choose(loose);
   const AutoSettingsResult t = p.choose(tight);
-  // Each choice runs its own pilot, whose timings move with the machine's load: at the small
-  // renders of the defaults (0.06 s predicted here) two pilots' time models differ by 10-20% on
-  // a busy machine (CI measured 0.062 s for the loose target against 0.055 s for the tight one),
-  // so the times are compared with that margin; the error terms come from images and do not move.
-  EXPECT_LE(l.predictedSeconds, 1.5 * t.predictedSeconds);
+  // Each choice runs its own pilot, and its time model is the pilot's own timing of small renders:
+  // two pilots' predicted seconds differed by 12% and by 60% in CI at the defaults' tiny renders,
+  // so they are not compared (that would be a timed test). What the targets decide does not
+  // depend on the machine: each choice meets its own target.
+  EXPECT_TRUE(l.met);
+  EXPECT_TRUE(t.met);
+  EXPECT_LE(l.predictedRelMse, loose.targetRelMse);
+  EXPECT_LE(t.predictedRelMse, tight.targetRelMse);
   EXPECT_LE(l.spp, t.spp);
   EXPECT_LE(t.predictedRelMse, l.predictedRelMse);
   // A target no setting can meet: the most accurate is chosen and says so.
