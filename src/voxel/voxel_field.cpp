@@ -313,27 +313,82 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
 /// turned); normal = opacity-weighted sum of the turned normals, renormalized; front and back
 /// radiance = opacity-weighted means (sum(opacity * radiance) * voxel volume is preserved before
 /// storage). For cones: axisFraction = opacity-weighted mean |normal| per axis.
-VoxelArrays restrictLevel(const Level& child) {
-  std::vector<std::pair<uint64_t, uint32_t>> parents;
-  parents.reserve(child.size());
+/// The weight a child voxel gives one parent, per axis, in eighths: box 4 (its own parent
+/// only, 4/8 per axis = 1/8 in 3D); Gaussian 3 to its own parent and 1 to the parent beside it
+/// on its side (the binomial [1 3 3 1] / 8 over the 4 children nearest the parent's centre).
+/// Either way a child's weights sum to 1/8 and a parent's to 1: coverage and flux are
+/// conserved, and a plane stays one crossing (VoxelSample::projected) at every level.
+struct ChildShare {
+  uint64_t parent;
+  uint32_t child;
+  float weight;
+  bool operator<(const ChildShare& o) const { return parent != o.parent ? parent < o.parent : child < o.child; }
+};
+
+std::vector<ChildShare> childShares(const Level& child, MipFilter filter) {
+  std::vector<ChildShare> shares;
+  const uint32_t parentRes = std::max(1u, child.resolution >> 1);
+  if (filter == MipFilter::Box) {
+    shares.reserve(child.size());
+    child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
+      shares.push_back({voxel::packKey(i >> 1, j >> 1, k >> 1), uint32_t(v), 0.125f});
+    });
+    return shares;
+  }
+  shares.reserve(child.size() * 8);
   child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-    parents.emplace_back(voxel::packKey(i >> 1, j >> 1, k >> 1), uint32_t(v));
+    const uint32_t c[3] = {i, j, k};
+    uint32_t own[3], other[3];
+    for (int a = 0; a < 3; ++a) {
+      own[a] = c[a] >> 1;
+      // An even child lies on its parent's low side, next to the parent below. At the
+      // field's faces the neighbour does not exist: its share goes to the own parent.
+      const int64_t n = (c[a] & 1u) ? int64_t(own[a]) + 1 : int64_t(own[a]) - 1;
+      other[a] = n < 0 || n >= int64_t(parentRes) ? own[a] : uint32_t(n);
+    }
+    for (int corner = 0; corner < 8; ++corner) {
+      uint32_t q[3];
+      float w = 1.0f;
+      for (int a = 0; a < 3; ++a) {
+        const bool side = (corner >> a) & 1;
+        q[a] = side ? other[a] : own[a];
+        w *= side ? 0.125f : 0.375f;
+      }
+      shares.push_back({voxel::packKey(q[0], q[1], q[2]), uint32_t(v), w});
+    }
   });
+  // A child whose neighbour was folded back names its own parent twice: merge those.
+  tbb::parallel_sort(shares.begin(), shares.end());
+  size_t out = 0;
+  for (size_t s = 0; s < shares.size(); ++s) {
+    if (out > 0 && shares[out - 1].parent == shares[s].parent && shares[out - 1].child == shares[s].child)
+      shares[out - 1].weight += shares[s].weight;
+    else
+      shares[out++] = shares[s];
+  }
+  shares.resize(out);
+  return shares;
+}
+
+/// One coarser level from `child` (VoxelField::buildMips).
+VoxelArrays restrictLevel(const Level& child, MipFilter filter) {
+  std::vector<ChildShare> shares = childShares(child, filter);
   // (parent key, child index) is unique: one order at any thread count.
-  tbb::parallel_sort(parents.begin(), parents.end());
+  if (filter == MipFilter::Box) tbb::parallel_sort(shares.begin(), shares.end());
   VoxelArrays out;
   const bool lit = !child.radiance.empty();
-  for (size_t a = 0; a < parents.size();) {
+  for (size_t a = 0; a < shares.size();) {
     size_t end = a;
-    size_t ref = parents[a].second;
-    for (; end < parents.size() && parents[end].first == parents[a].first; ++end)
-      if (child.opacity(parents[end].second) > child.opacity(ref)) ref = parents[end].second;
-    const Vec3 refNormal = child.normalAt(ref);
+    size_t ref = a;  // the child that weighs most: the others turn to agree with it
+    for (; end < shares.size() && shares[end].parent == shares[a].parent; ++end)
+      if (shares[end].weight * child.opacity(shares[end].child) > shares[ref].weight * child.opacity(shares[ref].child))
+        ref = end;
+    const Vec3 refNormal = child.normalAt(shares[ref].child);
     double opSum = 0.0;
     DVec3 front(0.0), back(0.0), nrm(0.0), axes(0.0);
     for (size_t b = a; b < end; ++b) {
-      const size_t c = parents[b].second;
-      const double op = child.opacity(c);
+      const size_t c = shares[b].child;
+      const double op = double(shares[b].weight) * child.opacity(c);
       const Vec3 n = child.normalAt(c);
       const bool turned = glm::dot(n, refNormal) < 0.0f;
       opSum += op;
@@ -346,8 +401,8 @@ VoxelArrays restrictLevel(const Level& child) {
       }
     }
     const double len = glm::length(nrm);
-    out.keys.push_back(parents[a].first);
-    out.coverage.push_back(float(opSum / 8.0));
+    out.keys.push_back(shares[a].parent);
+    out.coverage.push_back(float(opSum));
     out.axisFraction.push_back(opSum > 0.0 ? Vec3(axes / opSum) : Vec3(0.0f));
     out.normal.push_back(len > 0.0 ? Vec3(nrm / len) : refNormal);
     if (lit) {
@@ -652,7 +707,7 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
   for (size_t m = 1; m < mips; ++m) {
     Timer t;
     const Level& child = grid.levels.back();
-    VoxelArrays a = restrictLevel(child);
+    VoxelArrays a = restrictLevel(child, settings.mipFilter);
     grid.levels.push_back(makeLevel(child.level - 1, child.voxelSize * 2.0, a));
     grid.levels.back().buildSeconds = t.seconds();
   }
@@ -768,7 +823,7 @@ void VoxelField::buildMips(Progress* progress) {
       if (progress && progress->cancelled()) throw CancelledError();
       Timer t;
       const Level& child = grid->levels.back();
-      VoxelArrays a = restrictLevel(child);
+      VoxelArrays a = restrictLevel(child, f.settings.mipFilter);
       const int level = child.level - 1;
       const double vs = child.voxelSize * 2.0;
       grid->levels.push_back(makeLevel(level, vs, a));

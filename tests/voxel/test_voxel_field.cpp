@@ -172,12 +172,19 @@ TEST(VoxelInject, UniformlyLitPlaneRadiance) {
   EXPECT_NEAR(sum / count, expected, 0.01 * expected);
 }
 
+/// Both mip filters (MipFilter), named for the tests' messages.
+const std::vector<std::pair<MipFilter, const char*>> kMipFilters = {{MipFilter::Box, "box"},
+                                                                    {MipFilter::Gaussian, "gaussian"}};
+
 TEST(VoxelMips, PreserveOpacityWeightedRadiance) {
+  for (const auto& [filter, filterName] : kMipFilters) {
+  SCOPED_TRACE(filterName);
   const Scene scene = shapesScene({planeAt(0.0f), quadJson({0, 0, 0.1f}, {1, 0, 0.9f}, {1, 1, 0.9f}, {0, 1, 0.1f})});
   VoxelSettings settings;
   settings.padding = 0.0;  // grid on the scene's bounds: the planes below sit on voxel faces
   settings.level = 6;
   settings.coarsestLevel = 2;
+  settings.mipFilter = filter;
   VoxelField field = VoxelField::voxelize(scene, settings);
   PhotonMaps maps;
   maps.global = photonsOnPlane(20000, 0.0f, Vec3(1e-4f, 2e-4f, 3e-4f), 5);
@@ -221,7 +228,8 @@ TEST(VoxelMips, PreserveOpacityWeightedRadiance) {
     double op;
     DVec3 w;
     sums(level, op, w);
-    // The parent values are exact means of the stored children, then stored compactly:
+    // The parent values are exact weighted means of the stored children (each child's weights
+    // sum to 1/8, folded back at the field's faces), then stored compactly:
     // opacity as half (relative error <= 2^-11), radiance as RGB9E5 (<= 2^-10 of the largest
     // channel; the smallest channel here is >= 1/3 of it: <= 3 * 2^-10). A product is within
     // 2^-11 + 3 * 2^-10 = 3.4e-3, and sums of positive terms keep that relative bound.
@@ -236,6 +244,7 @@ TEST(VoxelMips, PreserveOpacityWeightedRadiance) {
   const Vec3 p(0.5f, 0.5f, 0.0f);
   const VoxelSample a = field.sample(p, 3.0f), b = field.sample(p, 4.0f), m = field.sample(p, 3.5f);
   EXPECT_NEAR(m.opacity, 0.5f * (a.opacity + b.opacity), 1e-6f);
+  }
 }
 
 TEST(VoxelMips, APlaneIsOneCrossingAtEveryLevel) {
@@ -245,7 +254,9 @@ TEST(VoxelMips, APlaneIsOneCrossingAtEveryLevel) {
   // axis-aligned plane is exactly one crossing at every level and any sample offset (up to
   // the half-float storage of the coverage).
   const Scene scene = shapesScene({planeAt(0.3f)});
+  for (const auto& [filter, filterName] : kMipFilters) {
   VoxelSettings settings;
+  settings.mipFilter = filter;
   settings.padding = 0.0;  // grid on the scene's bounds: the planes below sit on voxel faces
   settings.level = 6;
   settings.coarsestLevel = 2;
@@ -258,7 +269,57 @@ TEST(VoxelMips, APlaneIsOneCrossingAtEveryLevel) {
       double crossings = 0.0;
       for (double z = offset * v; z < 1.0; z += v)
         crossings += double(field.sample(Vec3(0.5f, 0.5f, float(z)), level).projected.z) * v / v0;
-      EXPECT_NEAR(crossings, 1.0, 2e-3) << "level " << level << " offset " << offset;
+      EXPECT_NEAR(crossings, 1.0, 2e-3) << filterName << " level " << level << " offset " << offset;
+    }
+  }
+  }
+}
+
+TEST(VoxelMips, ALookupsFootprintHasTheVarianceTheConesAssume) {
+  // LookupFootprint: a lookup of voxel size v spreads a surface over variance (v^2 - b v0^2) / a
+  // per axis (box mips v^2 / 4; Gaussian 5 v^2 / 12 - v0^2 / 6). Measured on a plane z = p
+  // (a point along z): the opacity that sample() reads along z through it is the lookup's
+  // kernel; its variance about p, averaged over planes spread evenly across one level-3 voxel
+  // (the derivation averages over where the surface lies in its voxels), is the footprint.
+  constexpr int kFinest = 7, kCoarsest = 3, kPlanes = 32;
+  for (const auto& [filter, filterName] : kMipFilters) {
+    const LookupFootprint fp = LookupFootprint::of(filter);
+    std::map<int, double> variance, mean;
+    for (int k = 0; k < kPlanes; ++k) {
+      const double p = 0.5 + (k + 0.5) / kPlanes / 8.0;
+      // The wall x = 0 spans z in [0, 1] so the grid covers the unit cube; it lies far from the
+      // profile at x = 0.5.
+      const Scene scene = shapesScene({planeAt(float(p)), quadJson({0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {0, 0, 1})});
+      VoxelSettings settings;
+      settings.padding = 0.0;
+      settings.level = kFinest;
+      settings.coarsestLevel = kCoarsest;
+      settings.mipFilter = filter;
+      VoxelField field = VoxelField::voxelize(scene, settings);
+      field.buildMips();
+      const double v0 = field.voxelSize(kFinest);
+      for (int level = kFinest; level >= kCoarsest; --level) {
+        const double v = field.voxelSize(level);
+        double w = 0.0, m1 = 0.0, m2 = 0.0;
+        // Midpoints of steps of v0 / 8 (samples on the tents' kinks would shift the moment).
+        for (double z = p - 4.0 * v + v0 / 16.0; z < p + 4.0 * v; z += v0 / 8.0) {
+          const double o = field.sample(Vec3(0.5f, 0.5f, float(z)), float(level)).opacity;
+          w += o;
+          m1 += o * (z - p);
+          m2 += o * (z - p) * (z - p);
+        }
+        ASSERT_GT(w, 0.0);
+        mean[level] += m1 / w / kPlanes;
+        variance[level] += m2 / w / kPlanes;
+      }
+    }
+    for (int level = kFinest; level >= kCoarsest; --level) {
+      const double v = 1.0 / (1 << level), v0 = 1.0 / (1 << kFinest);
+      // The planes lie 2 per finest voxel, not uniformly within it: the finest level's box
+      // term is v0^2 / 12 (1 - 1/2^2) instead of v0^2 / 12.
+      const double expected = (v * v - double(fp.b) * v0 * v0) / double(fp.a) - v0 * v0 / 12.0 / 4.0;
+      EXPECT_NEAR(variance[level], expected, 0.02 * expected) << filterName << " level " << level;
+      EXPECT_NEAR(mean[level], 0.0, 0.02 * v) << filterName << " level " << level;
     }
   }
 }

@@ -33,6 +33,28 @@ struct Photon;
 /// bright; with it 8-12% and 20-23%.
 constexpr double kDefaultFieldPadding = 1.0 / 16.0;
 
+/// How a mip level is filtered from the next finer one (VoxelField::buildMips).
+enum class MipFilter {
+  Box,      ///< the mean of the 2x2x2 children
+  Gaussian  ///< the binomial [1 3 3 1] / 8 per axis over the 4x4x4 children nearest the centre
+};
+
+/// The footprint of one lookup (VoxelField::coneSample) at voxel size v, as a variance per
+/// axis: what the mips' prefilter spread plus the trilinear tent (variance v^2 / 6). The finest
+/// level holds each surface's box average over its voxel (v0^2 / 12). A box mip adds the
+/// spread of its 2 children (1/4 of a child voxel squared, v^2 / 16) and keeps v^2 / 12 at
+/// every level; a Gaussian mip adds the binomial's (3/4 of a child voxel squared, 3 v^2 / 16),
+/// which sums to v^2 / 4 - v0^2 / 6. A lookup of variance sigma^2 therefore takes
+///   box:      v^2 = 4 sigma^2
+///   Gaussian: v^2 = 12/5 sigma^2 + 2/5 v0^2   (5 v^2 / 12 - v0^2 / 6 = sigma^2)
+/// i.e. v^2 = a sigma^2 + b v0^2 (tests/voxel: the measured variance of a lookup of a point).
+struct LookupFootprint {
+  float a = 4.0f, b = 0.0f;
+  static LookupFootprint of(MipFilter filter) {
+    return filter == MipFilter::Box ? LookupFootprint{4.0f, 0.0f} : LookupFootprint{2.4f, 0.4f};
+  }
+};
+
 struct VoxelSettings {
   int level = 8;             ///< finest level, [1, 13]
   int coarsestLevel = 2;     ///< coarsest mip level built, [0, level]
@@ -44,6 +66,7 @@ struct VoxelSettings {
   /// Empty margin around the scene's bounds on every side, as a fraction of their longest side,
   /// so that no surface sits on the field's boundary (see kDefaultFieldPadding); [0, 1].
   double padding = kDefaultFieldPadding;
+  MipFilter mipFilter = MipFilter::Box;
 };
 
 /// Memory and time of one grid at one level.
@@ -114,8 +137,9 @@ public:
   /// earlier injections; rebuilds mips already built.
   void inject(const PhotonMaps& photons, Progress* progress = nullptr);
 
-  /// Build levels level-1 ... coarsestLevel by 2x2x2 box restriction: opacity = mean coverage
-  /// of the 8 children; each child turned to agree with the most opaque one (two-sided
+  /// Build levels level-1 ... coarsestLevel by restriction (settings.mipFilter: the 2x2x2
+  /// children's mean, or the binomial over 4x4x4): opacity = weighted mean coverage of the
+  /// children; each child turned to agree with the most opaque one (two-sided
   /// surfaces: front and back swap when turned), then normal = opacity-weighted sum
   /// (renormalized), front and back radiance = opacity-weighted means, opacity-weighted mean
   /// |normal| per axis (for VoxelSample::projected).

@@ -22,6 +22,18 @@ ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField&
   m_coarsest = levels.back();
   m_v0 = float(m_field.voxelSize(m_finest));
   m_fieldBounds = m_field.bounds();
+  m_footprint = LookupFootprint::of(m_field.settings().mipFilter);
+}
+
+float ConeTracer::crossSectionVariance(float tanHalf) {
+  // Directions uniform over the cap of half-angle theta (c = cos theta) meet the plane at unit
+  // distance along the axis at tan(alpha) from it: E[tan^2 alpha] = integral of tan^2 alpha
+  // sin alpha over [0, theta] / (1 - c) = ((1 - c)^2 / c) / (1 - c) = (1 - c) / c, half of it
+  // per axis; the mean is the axis. (tan^2 theta / 4 for narrow cones: the uniform disk's.)
+  const float c = 1.0f / std::sqrt(1.0f + tanHalf * tanHalf);
+  // 1 - c without cancellation: 1 - c = tan^2 c^2 / (1 + c).
+  const float oneMinusC = tanHalf * tanHalf * c * c / (1.0f + c);
+  return 0.5f * oneMinusC / c;
 }
 
 std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n,
@@ -45,7 +57,11 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   // The point the lookups' voxels are seen from (each shows the side of its surface facing
   // it): the apex lifted clear of its own surface's finest voxels, whose centres lie up to
   // sqrt(3)/2 v0 off the surface and would otherwise face it from either side at random.
-  const Vec3 apex = p + n * (kClearance * m_v0);
+  const Vec3 apex = p + n * (kApexLift * m_v0);
+  // The lookup size whose footprint has the cone's cross-section variance at distance t
+  // (LookupFootprint): v^2 = a sigma^2 + b v0^2, sigma^2 = t^2 crossSectionVariance.
+  const float va = m_footprint.a * crossSectionVariance(tanHalf), vb = m_footprint.b * m_v0 * m_v0;
+  auto lookupSize = [&](float t) { return std::sqrt(va * t * t + vb); };
   float A = 0.0f;
   Vec3 C(0.0f);
   float tEnd = m_maxDistance;
@@ -55,7 +71,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
-    const float v = std::clamp(hit->t * tanHalf, m_v0, vMax);
+    const float v = std::clamp(lookupSize(hit->t), m_v0, vMax);
     return m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
         .radiance;
   }
@@ -81,7 +97,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     // blends in the next coarser mip, whose voxels must clear the surface too: where they
     // would not, the lookup takes the finest whole level that does.
     const float vClear = t * cosPhi / kClearance;
-    float v = std::min(t * tanHalf, vClear);
+    float v = std::min(lookupSize(t), vClear);
     if (v > m_v0 && m_v0 * ceilPow2(v / m_v0) > vClear) v = m_v0 * floorPow2(vClear / m_v0);
     v = std::clamp(v, m_v0, vMax);
     if (hitSurface && t + kClearance * v > tEnd) break;

@@ -30,6 +30,11 @@ constexpr int kDefaultFilterRadius = 12;
 constexpr int kDefaultGatherSpacing = 4;
 }  // namespace
 
+const std::vector<std::string>& VoxelConeSettings::mipFilterNames() {
+  static const std::vector<std::string> names = {"box", "gaussian"};
+  return names;
+}
+
 const std::vector<std::string>& VoxelConeSettings::viewNames() {
   static const std::vector<std::string> names = {"full", "direct", "indirect", "caustic", "field"};
   return names;
@@ -51,6 +56,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   if (v.causticLevel != 0 && v.causticLevel < v.coarsestLevel)
     throw SettingsError("voxcone.caustic_level: must be 0 or at least coarsest_level");
   v.kernelSigmaVoxels = float(r.number("kernel_sigma", 0.75, 0.05, 16.0));
+  v.mipFilter = r.choice("mip_filter", mipFilterNames()) == "gaussian" ? MipFilter::Gaussian : MipFilter::Box;
 
   uint64_t photons, causticPhotons;
   defaultPhotonCounts(render.photons, render.causticPhotons, kVoxconeDefaultPhotons, kVoxconeDefaultCausticPhotons,
@@ -87,6 +93,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"coarsest_level", voxel.coarsestLevel},
           {"caustic_level", voxel.causticLevel},
           {"kernel_sigma", voxel.kernelSigmaVoxels},
+          {"mip_filter", mipFilterNames()[size_t(voxel.mipFilter)]},
           {"photons", photons.photons},
           {"caustic_photons", photons.causticPhotons},
           {"photon_seed", photons.seed},

@@ -83,7 +83,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in ConeTracer::trace).
-  const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kClearance * voxel); };
+  const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kApexLift * voxel); };
   if (m_settings.view == View::Field)
     return m_field
         .coneSample(sh.position, float(m_tracer->finestLevel()), -woWorld, viewFrom(woWorld, m_tracer->finestVoxel()))

@@ -6,6 +6,7 @@
 #include "voxcone/core/rng.h"
 #include "voxcone/image/metrics.h"
 #include "voxcone/integrator/voxel_cone/cone_set.h"
+#include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/integrator.h"
 
 #include "../../support/render_helpers.h"
@@ -49,18 +50,41 @@ TEST(ConeSet, WeightsAreTheCosineMeasureOfEachCell) {
   EXPECT_THROW(ConeSet(6, 2.0f), SettingsError);
 }
 
+TEST(ConeTracer, CrossSectionVarianceIsTheCapsByQuadrature) {
+  // Per-axis variance of tan(alpha) for directions uniform over the cap alpha <= theta: the
+  // mean of tan^2 alpha over the cap's solid angle (weight sin alpha), halved, by the midpoint
+  // rule; narrow cones tend to the disc's tan^2(theta) / 4.
+  for (double thetaDeg : {0.5, 5.0, 20.4, 33.557, 60.0, 80.0}) {
+    const double theta = thetaDeg * kPi / 180.0;
+    constexpr int kSteps = 200000;
+    double num = 0.0, den = 0.0;
+    for (int i = 0; i < kSteps; ++i) {
+      const double a = (i + 0.5) / kSteps * theta, t = std::tan(a);
+      num += t * t * std::sin(a);
+      den += std::sin(a);
+    }
+    const double expected = 0.5 * num / den;
+    EXPECT_NEAR(ConeTracer::crossSectionVariance(float(std::tan(theta))), expected, 1e-5 * expected + 1e-12) << thetaDeg;
+  }
+  const float narrow = 1e-3f;
+  EXPECT_NEAR(ConeTracer::crossSectionVariance(narrow), narrow * narrow / 4.0f, 1e-3f * narrow * narrow);
+}
+
 TEST(VoxelCone, EmissiveFurnaceGivesTwo) {
   // Albedo 0.5, Le = 1: L = 2 = emission (1) + direct light by shadow rays (0.5) + cones
   // gathering the walls' reflected radiance 1 (photons, all bounces) times albedo 0.5.
   const Scene scene = test::furnaceScene(0.5f, 1.0f, 0.0f, 4, 2);
-  for (const char* gather : {"march", "hit"})
-    for (int level : {5, 6}) {
-      const RenderResult r =
-          renderWith(scene, "voxcone", scene.render, {{"photons", 100000}, {"level", level}, {"gather", gather}});
-      const Vec3 m = imageMean(r.image);
-      for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 2.0, 0.04) << gather << " level " << level;
-      EXPECT_EQ(r.invalidSamples, 0u);
-    }
+  // Both mip filters: their weights are normalized (a parent's sum to one), so a closed
+  // uniformly lit enclosure stays uniform at every level and every cone sees radiance 1.
+  for (const char* filter : {"box", "gaussian"})
+    for (const char* gather : {"march", "hit"})
+      for (int level : {5, 6}) {
+        const RenderResult r = renderWith(scene, "voxcone", scene.render,
+                                          {{"photons", 100000}, {"level", level}, {"gather", gather}, {"mip_filter", filter}});
+        const Vec3 m = imageMean(r.image);
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 2.0, 0.04) << filter << " " << gather << " level " << level;
+        EXPECT_EQ(r.invalidSamples, 0u);
+      }
 }
 
 TEST(VoxelCone, PointLightFurnaceGivesOne) {

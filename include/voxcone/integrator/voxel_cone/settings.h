@@ -20,6 +20,8 @@ struct VoxelConeSettings {
   enum class View { Full, Direct, Indirect, Caustic, Field };
   /// The `view` option's values, indexed by View.
   static const std::vector<std::string>& viewNames();
+  /// The `mip_filter` option's values, indexed by MipFilter (the first is the default).
+  static const std::vector<std::string>& mipFilterNames();
 
   int maxDepth = 16;            ///< longest specular chain (the render's max depth)
   VoxelSettings voxel;          ///< level, coarsest level, caustic level, photon footprint

@@ -18,11 +18,14 @@
 ///  - glossy surfaces: one cone along a BSDF-sampled direction, weight f cos / pdf, whose
 ///    half-angle is atan(roughness).
 ///
-/// A cone of half-angle theta is marched front to back. Each sample is a Gaussian-filtered
-/// lookup whose variance matches the cone's cross-section: a disc of radius r = t tan(theta)
-/// has variance r^2 / 4 per axis, and a trilinear lookup in a mip of voxel size v (box of the
-/// voxel, variance v^2 / 12, convolved with the tent, v^2 / 6) has v^2 / 4, so the level is the
-/// one with v = r (fractional levels blend two mips). Along the axis the samples are spaced by
+/// A cone of half-angle theta is marched front to back. Each sample is a filtered lookup whose
+/// footprint has the variance of the cone's cross-section: directions uniform over the cone's
+/// solid angle meet the plane at distance t with variance sigma^2 = t^2 (1 - cos theta) /
+/// (2 cos theta) per axis (ConeTracer::crossSectionVariance; t^2 tan^2(theta) / 4 for narrow
+/// cones, the disc's r^2 / 4), and a trilinear lookup in a mip of voxel size v has the variance
+/// of the mips' prefilter plus the tent's v^2 / 6 (LookupFootprint: box mips v^2 / 4 in all,
+/// v = 2 sigma; Gaussian mips, `mip_filter`, 5 v^2 / 12 - v0^2 / 6). Fractional levels blend two
+/// mips. Along the axis the samples are spaced by
 /// `cone_step` * v (1: the Gaussians' 2 sigma). A step meets a = dot(projected, |d|) * step / v0
 /// surfaces (VoxelSample::projected; a plane adds up to exactly one crossing at every level), and
 /// occlusion accumulates linearly, a' = min(a, 1 - A): C += a' L, A += a', with L the radiance of
@@ -32,14 +35,16 @@
 /// multiplicative compositing lets a wall split over two samples leak instead.
 ///
 /// Self-occlusion: the shading point's own surface fills voxels whose centres lie within half
-/// a voxel diagonal (sqrt(3)/2 v) of it, and a trilinear lookup reaches 1 v from its centre, so
-/// a lookup at height h above the tangent plane is clear of the own surface when
-/// v <= h / (1 + sqrt(3)/2). The march follows the cone's own axis from the point, its first
-/// lookup where the axis is (1 + sqrt(3)/2) v0 above the tangent plane (v0: the finest voxel),
-/// and the lookup size is min(r, h / (1 + sqrt(3)/2)), snapped down to a whole level where the
-/// coarser mip of a fractional level would not clear: a cone never sees its own tangent plane,
-/// without any tuned offset. (Lifting the cone's origin off the surface instead shifts the cone
-/// towards what it sees: an occluder 8 voxels away came out 30% too bright.)
+/// a voxel diagonal (sqrt(3)/2 v) of it, and a trilinear lookup takes the centres in the cube of
+/// half-side v around it, which reaches up to sqrt(3) v along a tilted normal, so a lookup at
+/// height h above the tangent plane is clear of the own surface when v <= h / (3 sqrt(3)/2)
+/// (kClearance). The march follows the cone's own axis from the point, its first lookup where
+/// the axis is 3 sqrt(3)/2 v0 above the tangent plane (v0: the finest voxel), and the lookup
+/// size is min(v(sigma), h / (3 sqrt(3)/2)), snapped down to a whole level where the coarser mip
+/// of a fractional level would not clear: a cone never sees its own tangent plane, without any
+/// tuned offset. (Lifting the cone's origin off the surface instead shifts the cone towards
+/// what it sees: an occluder 8 voxels away came out 30% too bright.) For all but the
+/// narrowest cones the clearance, not the cone's width, sets the lookup size near the surface.
 ///
 /// Light leaking: a wall thinner than a voxel shares voxels (radiance, occlusion) with the room
 /// behind it. With `exact_segment` = S > 0 each cone first traces an exact HBVH ray along its
@@ -53,7 +58,7 @@
 ///    kVoxconeDefaultPhotons (10k) and kVoxconeDefaultCausticPhotons (20k)),
 ///    `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
 ///    `kernel_sigma` (photon footprint, finest voxels, default 0.75), `seed` (added to the
-///    render seed for the photon pass);
+///    render seed for the photon pass), `mip_filter` (`box`, default, or `gaussian`);
 ///  - `cones` [1, 256] (default 6), `cone_angle` (half-angle in degrees, default from the
 ///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
 ///    default: the scene's bounding-sphere diameter);
