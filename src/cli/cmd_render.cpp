@@ -103,31 +103,37 @@ void runRender(const RenderOptions& o) {
   const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
   const double buildSec = t.seconds();
 
-  // --target-error / --time-budget: a pilot pass chooses level, photons, cones and spp.
+  // --target-error / --time-budget: voxcone in averaged passes until the predicted error meets
+  // the target or the budget is spent (auto_settings.h).
   nlohmann::json autoReport;
-  double pilotSec = 0.0;
+  double pilotSec = 0.0, prepareSec = 0.0;
+  std::unique_ptr<Integrator> integrator;
+  RenderResult result;
   if (autoSettings) {
-    AutoSettingsRequest request;
+    ProgressiveRequest request;
     request.targetRelMse = o.targetError;
     request.timeBudget = o.timeBudget > 0.0 ? std::max(1e-3, o.timeBudget - total.seconds()) : 0.0;
-    request.fixedOptions = options;
-    request.fixedSpp = o.spp;
-    const AutoSettingsResult chosen = chooseVoxconeSettings(scene, *accel, settings, request, &progress);
-    options = chosen.options;
-    settings.spp = chosen.spp;
-    pilotSec = chosen.pilotSeconds;
+    request.options = options;
+    if (o.spp != 0) request.passSpp = o.spp;
+    ProgressiveResult chosen = renderVoxconeToTarget(scene, *accel, settings, request, &progress);
+    settings.spp = chosen.passes * request.passSpp;
+    pilotSec = chosen.controlSeconds;
+    prepareSec = chosen.prepareSeconds;
     autoReport = chosen.report;
-    std::printf("%s", chosen.summary.c_str());
-    std::fflush(stdout);
+    integrator = std::move(chosen.integrator);
+    result = std::move(chosen.result);
+    if (!o.quiet) {
+      std::printf("%s", chosen.summary.c_str());
+      std::fflush(stdout);
+    }
+  } else {
+    IntegratorContext ctx{scene, *accel, settings, options};
+    integrator = createIntegrator(settings.method, ctx);
+    t.reset();
+    integrator->prepare(&progress);
+    prepareSec = t.seconds();
+    result = renderImage(scene, *integrator, settings, &progress);
   }
-
-  IntegratorContext ctx{scene, *accel, settings, options};
-  std::unique_ptr<Integrator> integrator = createIntegrator(settings.method, ctx);
-  t.reset();
-  integrator->prepare(&progress);
-  const double prepareSec = t.seconds();
-
-  const RenderResult result = renderImage(scene, *integrator, settings, &progress);
 
   nlohmann::json meta;
   meta["voxcone_version"] = "0.1.0";
@@ -211,10 +217,11 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres) or kdtree")
       ->check(CLI::IsMember(accelKinds()));
   cmd->add_option("--target-error", o->targetError,
-                  "voxcone: choose level, photons, cones and spp from a pilot pass to meet this relMSE in the least time")
+                  "voxcone: render averaged passes (of --spp, default 4) until the predicted relMSE against the true "
+                  "image, from the passes' spread and path-traced control pixels, is at most this")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--time-budget", o->timeBudget,
-                  "voxcone: choose them for the least error in this many seconds (load and pilot included)")
+                  "voxcone: render averaged passes (of --spp, default 4) for this many seconds (load included)")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });

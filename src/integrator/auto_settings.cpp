@@ -1,49 +1,26 @@
-// The pilot pass of `render --target-error / --time-budget` (auto_settings.h).
+// render --target-error / --time-budget: voxcone in averaged passes with a self-estimated error
+// (auto_settings.h).
 
 #include "voxcone/integrator/auto_settings.h"
 
 #include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/image/metrics.h"
-#include "voxcone/integrator/integrator.h"
+#include "voxcone/integrator/voxel_cone/voxel_cone.h"
+
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <map>
 
 namespace voxcone {
 
 namespace {
 
-constexpr int kPilotSpp = 4;
-constexpr uint64_t kPilotPhotons = 100000;  ///< P0; the second photon pilot has 4 P0
-constexpr int kFinestLevel = 8;             ///< taken as converged in level
-const int kLevels[] = {5, 6, 7, 8};
-const int kCones[] = {6, 16};
-const uint64_t kPhotons[] = {10000, 25000, 50000, 100000, 250000, 500000, 1000000, 2000000};
-
-struct Pilot {
-  Image image;
-  double prepareSeconds = 0.0, renderSeconds = 0.0;
-};
-
-/// One pilot render: voxcone with `options` at the pilot settings.
-Pilot runPilot(const Scene& scene, const Accel& accel, const RenderSettings& pilotSettings, uint64_t pixelSeed,
-               const nlohmann::json& options) {
-  RenderSettings s = pilotSettings;
-  s.seed = pixelSeed;
-  IntegratorContext ctx{scene, accel, s, options};
-  std::unique_ptr<Integrator> integrator = createIntegrator("voxcone", ctx);
-  Pilot p;
-  Timer t;
-  integrator->prepare(nullptr);
-  p.prepareSeconds = t.seconds();
-  RenderResult r = renderImage(scene, *integrator, s);
-  p.renderSeconds = r.seconds;
-  p.image = std::move(r.image);
-  return p;
-}
+/// One control pixel per kControlBlock x kControlBlock block.
+constexpr int kControlBlock = 8;
 
 std::string fmt(const char* f, double v) {
   char b[64];
@@ -51,167 +28,229 @@ std::string fmt(const char* f, double v) {
   return b;
 }
 
+/// The control pixels: one per block, its place in the block from the seed (deterministic).
+std::vector<size_t> controlPixels(int width, int height, uint64_t seed) {
+  std::vector<size_t> pixels;
+  for (int by = 0; by < height; by += kControlBlock)
+    for (int bx = 0; bx < width; bx += kControlBlock) {
+      const uint64_t h = mixBits(seed ^ (uint64_t(by) << 32 | uint64_t(bx)) ^ 0x636f6e74726f6cull);
+      const int bw = std::min(kControlBlock, width - bx), bh = std::min(kControlBlock, height - by);
+      const int x = bx + int(h % uint64_t(bw)), y = by + int((h >> 32) % uint64_t(bh));
+      pixels.push_back(size_t(y) * size_t(width) + size_t(x));
+    }
+  return pixels;
+}
+
+/// The running estimates over the passes so far.
+struct Estimates {
+  double noise = 0.0;      ///< one pass's relMSE against its expectation
+  double bias2 = 0.0;      ///< mean squared relative bias, clamped at 0
+  double bias2Raw = 0.0;   ///< before clamping (may be negative from noise)
+  double bias2Error = 0.0; ///< standard error of bias2Raw
+  double predicted(int passes) const { return noise / double(passes) + bias2; }
+};
+
 }  // namespace
 
-AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel, const RenderSettings& settings,
-                                         const AutoSettingsRequest& req, Progress* progress) {
+std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                                       const std::vector<size_t>& pixels) {
+  std::vector<PixelSamples> out(pixels.size());
+  const int w = settings.width, h = settings.height;
+  tbb::parallel_for(size_t(0), pixels.size(), [&](size_t i) {
+    const size_t pixel = pixels[i];
+    const int x = int(pixel % size_t(w)), y = int(pixel / size_t(w));
+    Sampler sampler(settings.sampler, settings.seed, pixel, uint32_t(settings.spp));
+    PixelSamples& p = out[i];
+    for (int s = 0; s < settings.spp; ++s) {
+      sampler.startSample(uint32_t(s));
+      const Vec2 jitter = sampler.uniform2();
+      const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
+      const Vec3 L = integrator.li(ray, sampler);
+      if (!std::isfinite(L.x) || !std::isfinite(L.y) || !std::isfinite(L.z)) continue;
+      p.sum += DVec3(L);
+      p.sumSquares += DVec3(L) * DVec3(L);
+      ++p.count;
+    }
+  });
+  return out;
+}
+
+ProgressiveResult renderVoxconeToTarget(const Scene& scene, const Accel& accel, const RenderSettings& settings,
+                                        const ProgressiveRequest& req, Progress* progress) {
   const bool byError = req.targetRelMse > 0.0, byTime = req.timeBudget > 0.0;
   if (byError == byTime) throw SettingsError("give one of --target-error and --time-budget, with a positive value");
-  if (!req.fixedOptions.is_object()) throw SettingsError("voxcone options must be a JSON object");
-  Timer pilotTimer;
-  // The pilot's model (render time and pixel noise per sample) is of cones on every sample.
-  nlohmann::json fixed = req.fixedOptions;
-  if (!fixed.contains("gathers")) fixed["gathers"] = 0;
-  for (const char* k : {"level", "photons", "cones"})
-    if (fixed.contains(k) && !fixed[k].is_number_integer())
-      throw SettingsError(std::string("voxcone.") + k + ": expected an integer");
+  if (!(std::isfinite(req.targetRelMse) && std::isfinite(req.timeBudget)))
+    throw SettingsError("--target-error and --time-budget must be finite");
+  if (!req.options.is_object()) throw SettingsError("voxcone options must be a JSON object");
+  if (req.passSpp < 1 || req.controlSpp < 1 || req.maxPasses < 2)
+    throw SettingsError("a progressive render needs spp >= 1 per pass and at least 2 passes");
+  Timer total;
+  ProgressiveResult r;
+  const size_t n = size_t(settings.width) * size_t(settings.height);
+  std::vector<DVec3> sum(n, DVec3(0.0)), sumSquares(n, DVec3(0.0));
+  const std::vector<size_t> control = controlPixels(settings.width, settings.height, settings.seed);
+  std::vector<PixelSamples> controlSamples(control.size());
+  std::unique_ptr<Integrator> path;
+  {
+    RenderSettings ps = settings;
+    ps.method = "path";
+    path = createIntegrator("path", IntegratorContext{scene, accel, ps, nlohmann::json::object()});
+    path->prepare(nullptr);
+  }
+  nlohmann::json history = nlohmann::json::array();
+  Estimates est;
+  double passSeconds = 0.0;  // every pass's prepare, render and control pixels
+  int needed = 2;
+  uint64_t optionSeed = 0;  // voxcone's `seed` option: its photon seed is the pass seed plus it
+  std::string stopReason;
+  RenderSettings pass = settings;
+  pass.method = "voxcone";
+  pass.spp = req.passSpp;
+  for (int k = 0; k < req.maxPasses; ++k) {
+    if (progress && progress->cancelled()) throw CancelledError();
+    Timer passTimer;
+    pass.seed = settings.seed + uint64_t(k);
+    // One integrator for every pass: its voxels are kept, its photons traced anew per pass
+    // (the photon seed follows the pass's seed as it would in a render with that seed).
+    Timer t;
+    if (!r.integrator) {
+      r.integrator = createIntegrator("voxcone", IntegratorContext{scene, accel, pass, req.options});
+      r.integrator->prepare(nullptr);
+      optionSeed = static_cast<VoxelConeIntegrator&>(*r.integrator).settings().photons.seed - pass.seed;
+    } else {
+      static_cast<VoxelConeIntegrator&>(*r.integrator).reseed(pass.seed + optionSeed, nullptr);
+    }
+    r.prepareSeconds += t.seconds();
+    RenderResult img = renderImage(scene, *r.integrator, pass, progress);
+    for (size_t p = 0; p < n; ++p) {
+      const DVec3 v(img.image.pixels[p]);
+      sum[p] += v;
+      sumSquares[p] += v * v;
+    }
+    r.result.samples += img.samples;
+    r.result.invalidSamples += img.invalidSamples;
+    r.result.seconds += img.seconds;
+    for (const auto& [stage, sec] : img.stageSeconds.items())
+      r.result.stageSeconds[stage] = r.result.stageSeconds.value(stage, 0.0) + sec.get<double>();
+    r.result.filterStats = img.filterStats;
+    // The control pixels, path traced with this pass's seed, until bias2 is known well enough.
+    const double errorScale = byError ? req.targetRelMse : est.predicted(std::max(2, r.passes));
+    const bool controlDone = r.passes >= 2 && est.bias2Error < 0.05 * errorScale;
+    t.reset();
+    if (!controlDone) {
+    RenderSettings cs = pass;
+    cs.method = "path";
+    cs.spp = req.controlSpp;
+    cs.seed = mixBits(pass.seed ^ 0x7061746863746c31ull);
+    // Independent samples: the spread of stratified ones overstates their mean's variance
+    // (with Sobol the bias estimate came out -0.006 +- 0.001 on cornell-box).
+    cs.sampler = SamplerKind::Independent;
+    const std::vector<PixelSamples> c = renderPixels(scene, *path, cs, control);
+    for (size_t i = 0; i < control.size(); ++i) {
+      controlSamples[i].sum += c[i].sum;
+      controlSamples[i].sumSquares += c[i].sumSquares;
+      controlSamples[i].count += c[i].count;
+    }
+    }
+    r.controlSeconds += t.seconds();
+    r.passes = k + 1;
+    passSeconds += passTimer.seconds();
+    if (r.passes < 2) continue;
 
-  // Pilot settings: a quarter of the resolution per axis (at least 16 pixels), 4 spp.
-  RenderSettings ps = settings;
-  ps.width = std::max(16, settings.width / 4);
-  ps.height = std::max(16, settings.height / 4);
-  ps.spp = kPilotSpp;
-  const double causticRatio = settings.photons > 0 && settings.causticPhotons > 0
-                                  ? double(settings.causticPhotons) / double(settings.photons)
-                                  : 0.2;
-  // The user's other options (kernel, exact_segment, ...) apply to every pilot.
-  nlohmann::json base = fixed;
-  for (const char* k : {"level", "photons", "caustic_photons", "cones", "seed"}) base.erase(k);
-  auto opts = [&](int level, uint64_t photons, int cones, int photonSeed) {
-    nlohmann::json o = base;
-    o["level"] = level;
-    o["photons"] = photons;
-    o["caustic_photons"] = uint64_t(std::llround(double(photons) * causticRatio));
-    o["cones"] = cones;
-    o["seed"] = photonSeed;
-    return o;
-  };
-  const uint64_t s = settings.seed, p0 = kPilotPhotons, p1 = 4 * kPilotPhotons;
-  if (progress) progress->start("pilot", 8);
-  auto pilot = [&](uint64_t pixelSeed, const nlohmann::json& o) {
-    Pilot p = runPilot(scene, accel, ps, pixelSeed, o);
-    if (progress) progress->advance(1);
-    return p;
-  };
-  // Photon seed = pixel seed + option seed: A and B share their photons, A and P their pixels.
-  const Pilot A = pilot(s, opts(7, p0, 6, 1));
-  // Pixel noise at the full resolution (1 spp): a coarser pixel averages more of the image's
-  // edges and texture and is noisier per sample.
-  RenderSettings full = settings;
-  full.spp = 1;
-  const Pilot noiseA = runPilot(scene, accel, full, s, opts(7, p0, 6, 1));
-  const Pilot noiseB = runPilot(scene, accel, full, s + 1, opts(7, p0, 6, 0));
-  if (progress) progress->advance(1);
-  const Pilot P = pilot(s, opts(7, p1, 6, 2));
-  std::map<int, Pilot> levels;
-  for (int l : {5, 6, 8}) levels[l] = pilot(s, opts(l, p0, 6, 1));
-  levels[7] = A;
-  const Pilot C16 = pilot(s, opts(7, p0, 16, 1));
-  if (progress) progress->finish();
+    // The estimates from all passes so far.
+    const double K = double(r.passes);
+    double noiseSum = 0.0;
+    std::vector<double> passVariance(n * 3);  // one pass's variance per pixel and channel
+    for (size_t p = 0; p < n; ++p)
+      for (int ch = 0; ch < 3; ++ch) {
+        const double m = sum[p][ch] / K;
+        const double var = std::max(0.0, (sumSquares[p][ch] - K * m * m) / (K - 1.0));
+        passVariance[p * 3 + size_t(ch)] = var;
+        noiseSum += var / (m * m + kRelMseEpsilon);
+      }
+    est.noise = noiseSum / double(3 * n);
+    double b = 0.0, b2 = 0.0;
+    size_t terms = 0;
+    for (size_t i = 0; i < control.size(); ++i) {
+      const PixelSamples& cp = controlSamples[i];
+      if (cp.count < 2) continue;
+      double term = 0.0;
+      for (int ch = 0; ch < 3; ++ch) {
+        const double m = sum[control[i]][ch] / K;
+        const double pm = cp.sum[ch] / cp.count;
+        const double varP = std::max(0.0, (cp.sumSquares[ch] - cp.count * pm * pm) / (cp.count - 1.0)) / cp.count;
+        const double varM = passVariance[control[i] * 3 + size_t(ch)] / K;
+        term += ((m - pm) * (m - pm) - varM - varP) / (m * m + kRelMseEpsilon);
+      }
+      term /= 3.0;
+      b += term;
+      b2 += term * term;
+      ++terms;
+    }
+    if (terms > 1) {
+      est.bias2Raw = b / double(terms);
+      est.bias2Error = std::sqrt(std::max(0.0, b2 / double(terms) - est.bias2Raw * est.bias2Raw) / double(terms - 1));
+    }
+    est.bias2 = std::max(0.0, est.bias2Raw);
+    const double meanPass = passSeconds / K;
+    history.push_back({{"passes", r.passes}, {"noise_per_pass", est.noise}, {"bias2", est.bias2Raw},
+                       {"bias2_standard_error", est.bias2Error}, {"predicted_relmse", est.predicted(r.passes)},
+                       {"seconds", total.seconds()}});
+    if (byError) {
+      // Beyond two standard errors below the bias no number of passes reaches the target.
+      if (req.targetRelMse < est.bias2Raw - 2.0 * est.bias2Error)
+        throw SettingsError("--target-error " + fmt("%.3g", req.targetRelMse) +
+                            " is below voxcone's estimated squared bias " + fmt("%.3g", est.bias2Raw) + " (+- " +
+                            fmt("%.2g", est.bias2Error) + ", relMSE, from " + std::to_string(terms) +
+                            " path-traced control pixels): more passes cannot reach it; ask for at least " +
+                            fmt("%.3g", 1.25 * est.bias2Raw));
+      // Passes for the target over the bias plus one standard error (a short render's two
+      // passes know the bias to +-0.0004 on cornell-box), the margin at least a tenth of the
+      // target (a bias estimated just under it would ask for unbounded passes).
+      const double margin = std::max(req.targetRelMse - est.bias2 - est.bias2Error, 0.1 * req.targetRelMse);
+      needed = int(std::min<double>(req.maxPasses, std::ceil(est.noise / margin)));
+      if (r.passes >= needed) {
+        stopReason = "target";
+        break;
+      }
+    } else {
+      if (total.seconds() + meanPass > req.timeBudget) {
+        stopReason = "budget";
+        break;
+      }
+    }
+  }
+  if (stopReason.empty()) stopReason = "max_passes";
 
-  // The error terms (relMSE of a difference of two independent estimates is twice the variance
-  // term of one).
-  const double a = std::max(0.0, relMseOfEstimates(noiseA.image, noiseB.image) / 2.0);
-  const double b = std::max(0.0, relMseOfEstimates(A.image, P.image) / (1.0 / double(p0) + 1.0 / double(p1)));
-  std::map<int, double> levelBias;
-  for (int l : kLevels) levelBias[l] = l == kFinestLevel ? 0.0 : relMseOfEstimates(levels[l].image, levels[kFinestLevel].image);
-  const double coneBias6 = relMseOfEstimates(A.image, C16.image);
-  std::map<int, double> coneBias = {{6, coneBias6}, {16, 0.0}};
-  // Time terms.
-  const double pilotSamples = double(ps.width) * ps.height * kPilotSpp;
-  const double perPhoton = std::max(0.0, (P.prepareSeconds - A.prepareSeconds) / double(p1 - p0));
-  const double coneFactor = A.renderSeconds > 0.0 ? C16.renderSeconds / A.renderSeconds : 16.0 / 6.0;
-  const double pilotSeconds = pilotTimer.seconds();
-
-  auto fixedInt = [&](const char* k) { return fixed.contains(k) ? fixed[k].get<int64_t>() : int64_t(0); };
-  std::vector<int> levelChoices, coneChoices;
-  std::vector<uint64_t> photonChoices;
-  std::vector<int> sppChoices;
-  if (fixedInt("level") > 0) levelChoices = {int(fixedInt("level"))};
-  else levelChoices.assign(std::begin(kLevels), std::end(kLevels));
-  if (fixedInt("cones") > 0) coneChoices = {int(fixedInt("cones"))};
-  else coneChoices.assign(std::begin(kCones), std::end(kCones));
-  if (fixed.contains("photons")) photonChoices = {uint64_t(std::max<int64_t>(0, fixedInt("photons")))};
-  else photonChoices.assign(std::begin(kPhotons), std::end(kPhotons));
-  if (req.fixedSpp > 0) sppChoices = {req.fixedSpp};
-  else
-    for (int spp = 1; spp <= 4096; spp *= 2) sppChoices.push_back(spp);
-
-  struct Candidate {
-    int level, cones, spp;
-    uint64_t photons;
-    double pixelNoise, photonNoise, levelBias, coneBias, seconds;
-    double error() const { return pixelNoise + photonNoise + levelBias + coneBias; }
-  };
-  // A level or cone count the pilot did not render is predicted from the nearest it did.
-  auto nearestLevel = [&](int l) { return std::clamp(l, 5, 8); };
-  // Other cone counts (given by the user): linear in the count between and beyond 6 and 16.
-  auto biasOfCones = [&](int c) { return std::max(0.0, coneBias6 * (16.0 - c) / 10.0); };
-  auto coneTime = [&](int c) { return std::max(0.1, 1.0 + (coneFactor - 1.0) * (c - 6) / 10.0); };
-  std::vector<Candidate> all;
-  for (int l : levelChoices)
-    for (int c : coneChoices)
-      for (uint64_t ph : photonChoices)
-        for (int spp : sppChoices) {
-          const Pilot& lp = levels[nearestLevel(l)];
-          const double prepare = std::max(0.0, lp.prepareSeconds + perPhoton * (double(ph) - double(p0)));
-          const double render =
-              lp.renderSeconds / pilotSamples * double(settings.width) * settings.height * spp * coneTime(c);
-          all.push_back({l, c, spp, ph, a / spp, ph > 0 ? b / double(ph) : 1.0, levelBias[nearestLevel(l)],
-                         biasOfCones(c), prepare + render});
-        }
-  // Fastest meeting the target, or most accurate within the budget (the pilot's time spent);
-  // when none does, the most accurate (target) or the fastest (budget).
-  auto meets = [&](const Candidate& c) {
-    return byError ? c.error() <= req.targetRelMse : c.seconds <= req.timeBudget - pilotSeconds;
-  };
-  auto rank = [&](const Candidate& c) {
-    const bool ok = meets(c);
-    return std::make_pair(!ok, byError == ok ? c.seconds : c.error());
-  };
-  const Candidate* best = &*std::min_element(all.begin(), all.end(),
-                                             [&](const Candidate& x, const Candidate& y) { return rank(x) < rank(y); });
-  const bool met = meets(*best);
-  AutoSettingsResult r;
-  r.options = fixed;
-  r.options["level"] = best->level;
-  r.options["photons"] = best->photons;
-  if (!fixed.contains("caustic_photons"))
-    r.options["caustic_photons"] = uint64_t(std::llround(double(best->photons) * causticRatio));
-  r.options["cones"] = best->cones;
-  r.spp = best->spp;
-  r.predictedRelMse = best->error();
-  r.predictedSeconds = best->seconds;
-  r.pilotSeconds = pilotSeconds;
-  r.met = met;
-  const double noise = best->pixelNoise, photonNoise = best->photonNoise, lb = best->levelBias, cb = best->coneBias;
-  nlohmann::json levelJson = nlohmann::json::object();
-  for (const auto& [l, v] : levelBias) levelJson[std::to_string(l)] = v;
+  const double K = double(r.passes);
+  r.result.image = Image(settings.width, settings.height);
+  for (size_t p = 0; p < n; ++p) r.result.image.pixels[p] = Vec3(sum[p] / K);
+  r.noise = est.noise;
+  r.bias2 = est.bias2;
+  r.predictedRelMse = est.predicted(r.passes);
+  r.met = byError ? r.predictedRelMse <= req.targetRelMse : total.seconds() <= req.timeBudget;
+  const double controlShare = passSeconds > 0.0 ? r.controlSeconds / passSeconds : 0.0;
   r.report = {{"target_relmse", byError ? nlohmann::json(req.targetRelMse) : nlohmann::json()},
               {"time_budget_seconds", byTime ? nlohmann::json(req.timeBudget) : nlohmann::json()},
-              {"met", met},
-              {"chosen", {{"level", best->level}, {"photons", best->photons}, {"cones", best->cones}, {"spp", best->spp}}},
-              {"predicted_relmse", best->error()},
-              {"predicted_terms", {{"pixel_noise", noise}, {"photon_noise", photonNoise}, {"level_bias", lb}, {"cone_bias", cb}}},
-              {"predicted_seconds", best->seconds},
-              {"pilot",
-               {{"width", ps.width}, {"height", ps.height}, {"spp", kPilotSpp}, {"seconds", pilotSeconds},
-                {"pixel_noise_per_sample", a}, {"photon_noise_times_photons", b}, {"level_bias", levelJson},
-                {"cone_bias_6_vs_16", coneBias6}, {"prepare_seconds_per_photon", perPhoton},
-                {"render_seconds_per_sample_level7", A.renderSeconds / pilotSamples}, {"cone_time_factor_16_vs_6", coneFactor}}},
-              {"candidates", all.size()}};
-  r.summary = std::string(met ? "chose" : (byError ? "no setting meets the target; closest:" : "nothing fits the budget; fastest:")) +
-              " level " + std::to_string(best->level) + ", " + std::to_string(best->photons) + " photons, " +
-              std::to_string(best->cones) + " cones, " + std::to_string(best->spp) + " spp\n" +
-              "  predicted relMSE " + fmt("%.4g", best->error()) + " = pixel noise " + fmt("%.3g", noise) +
-              " + photon noise " + fmt("%.3g", photonNoise) + " + level bias " + fmt("%.3g", lb) + " + cone bias " +
-              fmt("%.3g", cb) + (byError ? " (target " + fmt("%.4g", req.targetRelMse) + ")" : std::string()) + "\n" +
-              "  predicted time " + fmt("%.2f", best->seconds) + " s" +
-              (byTime ? " (budget " + fmt("%.2f", req.timeBudget) + " s, pilot " + fmt("%.2f", pilotSeconds) + " s of it)"
-                      : " (pilot " + fmt("%.2f", pilotSeconds) + " s)") +
-              "\n  from a " + std::to_string(ps.width) + "x" + std::to_string(ps.height) +
-              " pilot: level bias 5/6/7 " + fmt("%.3g", levelBias[5]) + "/" + fmt("%.3g", levelBias[6]) + "/" +
-              fmt("%.3g", levelBias[7]) + " (against level 8), cone bias 6 vs 16 " + fmt("%.3g", coneBias6) + "\n";
+              {"met", r.met},
+              {"stopped_by", stopReason},
+              {"chosen", {{"passes", r.passes}, {"pass_spp", req.passSpp}, {"spp", r.passes * req.passSpp}}},
+              {"predicted_relmse", r.predictedRelMse},
+              {"predicted_terms", {{"noise", est.noise / K}, {"bias2", est.bias2}}},
+              {"noise_per_pass", est.noise},
+              {"bias2_raw", est.bias2Raw},
+              {"bias2_standard_error", est.bias2Error},
+              {"control", {{"pixels", control.size()}, {"block", kControlBlock}, {"spp_per_pass", req.controlSpp},
+                           {"seconds", r.controlSeconds}, {"share_of_passes", controlShare}}},
+              {"history", history}};
+  r.summary = std::string(r.met ? "rendered " : "stopped at ") + std::to_string(r.passes) + " passes of " +
+              std::to_string(req.passSpp) + " spp (" + stopReason + ")\n" + "  predicted relMSE " +
+              fmt("%.4g", r.predictedRelMse) + " = noise " + fmt("%.3g", est.noise) + " / " + std::to_string(r.passes) +
+              " passes + bias^2 " + fmt("%.3g", est.bias2) + " (+- " + fmt("%.2g", est.bias2Error) + ")" +
+              (byError ? " (target " + fmt("%.4g", req.targetRelMse) + ")" : std::string()) + "\n" + "  " +
+              fmt("%.2f", total.seconds()) + " s" +
+              (byTime ? " (budget " + fmt("%.2f", req.timeBudget) + " s)" : std::string()) + ", control pixels " +
+              fmt("%.3f", r.controlSeconds) + " s (" + fmt("%.1f", 100.0 * controlShare) + "% of the passes)\n";
   return r;
 }
 

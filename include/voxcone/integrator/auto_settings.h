@@ -1,54 +1,83 @@
 #pragma once
 /// \file auto_settings.h
-/// `voxcone render --target-error E | --time-budget S`: voxcone's voxel level, photon counts,
-/// cone count and samples per pixel chosen for the scene from a quick pilot pass.
+/// `voxcone render --target-error E | --time-budget S`: voxcone rendered in independent passes
+/// until the predicted error meets the target or the budget is spent.
 ///
-/// The pilot renders the scene at a quarter of the resolution (4 spp) six times and at the full
-/// resolution (1 spp) twice, and splits voxcone's error into four terms that it can measure
-/// without a reference, each from two pilots that differ in one thing only:
-///   pixel noise      a / spp    (two pixel seeds, the same photons; full resolution),
-///   photon noise     b / P      (two photon sets of P0 and 4 P0 photons, the same pixel seeds),
-///   level bias       c(L)       (levels 5, 6, 7 against 8, the same seeds),
-///   cone bias        d(C)       (6 cones against 16).
-/// Predicted relMSE = a/spp + b/P + c(L) + d(C), against voxcone's own converged image: the
-/// method's bias against the true image (what a path-traced reference shows) is not predicted.
-/// Time is predicted from the pilots' prepare times (per level; per photon from the two photon
-/// counts) and render times (per pixel sample, per level and cone count). The choice is the
-/// fastest setting whose predicted error meets the target, or the most accurate whose
-/// predicted time fits the budget.
+/// A pass is a whole voxcone render at `passSpp` (the defaults' 4 unless --spp is given) with
+/// its own pixel seed (seed + k) and photon seed; the image is the mean of the passes. Each pass
+/// traces new photons into the same voxelization (VoxelConeIntegrator::reseed), so photon noise,
+/// the gathers' noise and the direct light's all average out over the passes, and nothing a
+/// pass computes is thrown away: the pilot is the passes themselves plus a few path-traced
+/// control pixels. The prediction for K passes against the true image is
+///   relMSE(K) = noise / K + bias2
+///  - noise: one pass's relMSE against its own expectation, from the passes' spread: per pixel
+///    and channel sum_k (I_k - M)^2 / (K - 1), over (M^2 + eps), averaged (eps as relMSE's);
+///  - bias2: voxcone's mean squared bias against the true image. Control pixels (one in each 8x8
+///    block, chosen per block from the seed) are path traced, `controlSpp` samples per pass with
+///    a new seed each pass, unbiased; per control pixel (M - P)^2 - var(M) - var(P) over
+///    (M^2 + eps), with var(P) from the path samples' spread, var(M) from the passes', is an
+///    unbiased estimate of its squared relative bias, and their mean estimates bias2. Passes
+///    stop adding control samples once bias2's standard error is below 5% of the target (or
+///    of the prediction, for a budget): the control costs most where the render is short.
+/// After every pass both are re-estimated and the passes needed are recomputed, for the target
+/// less bias2 and its standard error (conservative where the bias is known poorly); a target below
+/// bias2 cannot be met by more passes (a SettingsError after the first two, which say so); a
+/// budget takes as many passes as the mean pass time leaves room for (at least two).
 
 #include "voxcone/core/progress.h"
+#include "voxcone/integrator/integrator.h"
 #include "voxcone/scene/scene.h"
 
 #include <nlohmann/json.hpp>
+
+#include <memory>
+#include <string>
 
 namespace voxcone {
 
 class Accel;
 
-struct AutoSettingsRequest {
-  double targetRelMse = 0.0;  ///< > 0: meet this predicted relMSE in the least time
-  double timeBudget = 0.0;    ///< > 0: least predicted error within this many seconds (pilot included)
-  /// voxcone options the user gave: a given level, photons or cones is kept, not chosen.
-  nlohmann::json fixedOptions = nlohmann::json::object();
-  int fixedSpp = 0;           ///< > 0: keep this spp
+struct ProgressiveRequest {
+  double targetRelMse = 0.0;  ///< > 0: stop once the predicted relMSE is at most this
+  double timeBudget = 0.0;    ///< > 0: seconds left for the passes (the caller has spent the rest)
+  nlohmann::json options = nlohmann::json::object();  ///< voxcone options, every pass
+  int passSpp = 4;            ///< samples per pixel of one pass
+  int controlSpp = 16;        ///< path samples per control pixel per pass
+  int maxPasses = 1024;
 };
 
-struct AutoSettingsResult {
-  nlohmann::json options;        ///< voxcone options to render with (fixed ones included)
-  int spp = 0;
-  double predictedRelMse = 0.0;
-  double predictedSeconds = 0.0; ///< prepare + render at the full resolution
-  double pilotSeconds = 0.0;
-  bool met = false;              ///< false: nothing met the target / fit the budget (closest chosen)
-  nlohmann::json report;         ///< the measured terms, the pilots and the choice, for the sidecar
-  std::string summary;           ///< what was chosen and why, a few lines for the console
+struct ProgressiveResult {
+  /// The mean of the passes: image, samples (all passes'), seconds (the passes' pixel loops),
+  /// stage seconds summed over the passes.
+  RenderResult result;
+  std::unique_ptr<Integrator> integrator;  ///< the last pass's (its settings and statistics)
+  int passes = 0;
+  double prepareSeconds = 0.0;   ///< every pass's prepare (photons, voxels, mips)
+  double controlSeconds = 0.0;   ///< the control pixels (the pilot's only extra cost)
+  double predictedRelMse = 0.0;  ///< noise / passes + bias2, at the end
+  double noise = 0.0, bias2 = 0.0;
+  bool met = false;              ///< target: predicted <= target; budget: the passes fit it
+  nlohmann::json report;         ///< estimates after every pass, for the sidecar
+  std::string summary;           ///< a few lines for the console
 };
 
-/// Run the pilot and choose. `settings` is the full render's (resolution, seed, max depth, the
-/// scene's photon defaults). Throws SettingsError for a request with neither or both of
-/// target and budget, or a non-positive one.
-AutoSettingsResult chooseVoxconeSettings(const Scene& scene, const Accel& accel, const RenderSettings& settings,
-                                         const AutoSettingsRequest& request, Progress* progress = nullptr);
+/// Render voxcone progressively for `request` (one of target and budget, positive); `settings`
+/// gives resolution, seed, sampler and max depth. Deterministic for a given seed at any thread
+/// count (the stopping decision depends on the images only, for a target; a budget's pass count
+/// depends on time). Throws SettingsError for a bad request or a target below the estimated
+/// bias, CancelledError when `progress` is cancelled.
+ProgressiveResult renderVoxconeToTarget(const Scene& scene, const Accel& accel, const RenderSettings& settings,
+                                        const ProgressiveRequest& request, Progress* progress = nullptr);
+
+/// Samples of `integrator`'s li at `pixels` (indices y * width + x): `settings.spp` each, drawn
+/// as renderImage draws them (the same sampler, seed and jitter), no indirect filter; their sum
+/// and sum of squares per channel (non-finite samples dropped and not counted). Parallel,
+/// deterministic.
+struct PixelSamples {
+  DVec3 sum{0.0}, sumSquares{0.0};
+  uint32_t count = 0;
+};
+std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                                       const std::vector<size_t>& pixels);
 
 }  // namespace voxcone

@@ -34,22 +34,31 @@ nlohmann::json VoxelConeIntegrator::statsJson() const {
   return j;
 }
 
-void VoxelConeIntegrator::prepare(Progress* progress) {
+void VoxelConeIntegrator::prepare(Progress* progress) { build(false, progress); }
+
+void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
+  m_settings.photons.seed = photonSeed;
+  build(m_tracer.has_value() && m_settings.voxel.causticLevel == 0, progress);
+}
+
+void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   Timer total;
   const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
   m_stats = maps.stats.toJson();
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
   Timer t;
-  VoxelField field = VoxelField::voxelize(m_scene, m_settings.voxel, progress, &maps.caustic);
+  if (!keepVoxels) {
+    m_tracer.reset();
+    m_field = VoxelField::voxelize(m_scene, m_settings.voxel, progress, &maps.caustic);
+  }
   m_stats["voxelize_seconds"] = t.seconds();
   t.reset();
-  field.inject(maps, progress);
+  m_field.inject(maps, progress);
   m_stats["inject_seconds"] = t.seconds();
   t.reset();
-  field.buildMips(progress);
+  m_field.buildMips(progress);
   m_stats["mips_seconds"] = t.seconds();
   m_stats["prepare_seconds"] = total.seconds();
-  m_field = std::move(field);
   m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
   const int causticLevel = m_field.settings().causticLevel;
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();

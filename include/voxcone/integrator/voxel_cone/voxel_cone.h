@@ -107,6 +107,12 @@ public:
   explicit VoxelConeIntegrator(const IntegratorContext& context);
   std::string name() const override { return "voxcone"; }
   void prepare(Progress* progress) override;
+  /// prepare() again with photons of another seed (what the passes of a progressive render
+  /// differ in): without a caustic grid the voxelization is kept and only the photons are
+  /// traced and injected again (it depends on the geometry alone); with one, everything is
+  /// rebuilt (the caustic grid holds only voxels near its photons).
+  void reseed(uint64_t photonSeed, Progress* progress);
+  const VoxelConeSettings& settings() const { return m_settings; }
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
   int indirectFilterRadius() const override { return m_settings.filterRadius; }
   Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
@@ -126,6 +132,8 @@ private:
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
   /// hit goes there instead (with the hit's position, normal and material).
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
+  /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
+  void build(bool keepVoxels, Progress* progress);
   /// li, with the first hit's indirect light in `split` when it is given.
   Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
 
