@@ -173,8 +173,8 @@ nlohmann::json sweepManifest(const SweepOptions& o) {
             {{"method", "voxcone"}, {"spp", 64},
              {"options", {{"gather_spacing", 1}, {"gathers", 16}, {"filter", 8}, {"cones", {6, 16}}}}},
             // render --target-error / --time-budget: where its choices land against the fronts.
-            {{"method", "voxcone"}, {"target_error", {0.01, 0.005, 0.003}}},
-            {{"method", "voxcone"}, {"time_budget", {1, 2, 5}}}};
+            {{"method", "voxcone"}, {"target_error", {0.002, 0.001, 0.0008}}},
+            {{"method", "voxcone"}, {"time_budget", {0.5, 1, 2, 5}}}};
   }
   return {{"reference", fs::absolute(o.referencePath).string()}, {"defaults", defaults}, {"grid", grid}};
 }

@@ -144,6 +144,8 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
   std::vector<WorkItem> items;
   items.reserve(triCount + 64);
   for (size_t t = 0; t < triCount; ++t) {
+    // Smooth glass is not in the field (VoxelField::voxelize): cones see through it.
+    if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
     const UVec3& tv = scene.triangles[t];
     const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
     WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}};

@@ -464,6 +464,17 @@ TEST(VoxelField, RejectsBadSettings) {
     s.padding = bad;
     EXPECT_THROW(VoxelField::voxelize(scene, s), SettingsError) << bad;
   }
+  // Smooth glass is left out of the field: a scene of glass alone has nothing to voxelize.
+  s.padding = kDefaultFieldPadding;
+  std::string glass = planeAt(0.0f);
+  glass.replace(glass.find("\"white\""), 7, "\"glass\"");
+  const std::string json = R"({
+    "camera": {"position": [0.5, 0.5, 3], "target": [0.5, 0.5, 0], "up": [0, 1, 0], "fov_y_deg": 40},
+    "materials": {"glass": {"type": "dielectric", "ior": 1.5}},
+    "shapes": [)" + glass + R"(],
+    "lights": [{"type": "point", "position": [0.5, 0.5, 2], "intensity": 1}]
+  })";
+  EXPECT_THROW(VoxelField::voxelize(parseScene(json, "glass-only", "."), s), SettingsError);
 }
 
 TEST(VoxelField, CausticGrid) {

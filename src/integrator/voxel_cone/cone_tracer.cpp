@@ -5,6 +5,7 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
+#include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
 
@@ -47,10 +48,28 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
   const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, hit->b1, hit->b2);
   out.position = sh.position;
   out.side = glm::dot(sh.geomNormal, d) < 0.0f ? sh.geomNormal : -sh.geomNormal;
+  out.surface = sh;
   return out;
 }
 
-Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const {
+Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const {
+  if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
+  const Material& m = m_scene.materials[sh.material];
+  const Frame frame(sh.shadingNormal);
+  DeltaLobe lobes[2];
+  const int count = bsdfDeltaLobes(m, frame.toLocal(-d), lobes);
+  Vec3 L(0.0f);
+  for (int i = 0; i < count; ++i) {
+    if (maxComponent(lobes[i].weight) < kSpecularCut) continue;
+    const Vec3 wi = frame.toWorld(lobes[i].wi);
+    const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
+    L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, depth + 1);
+  }
+  return L;
+}
+
+Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
+                       int depth) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -71,6 +90,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
+    if (m_scene.materials[hit->surface.material].isDelta()) return continueSpecular(hit->surface, d, tanHalf, depth);
     const float v = std::clamp(lookupSize(hit->t), m_v0, vMax);
     return m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
         .radiance;
@@ -79,8 +99,12 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   if (m_exactSegment > 0.0f) {
     if (const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_exactSegment * m_v0)) {
       hitSurface = true;
-      // The finest level around the hit, half a voxel towards the ray's side.
-      hitRadiance = m_field.coneSample(hit->position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
+      // A mirror or glass passes on what its exact reflected and refracted cones gather;
+      // elsewhere the finest level around the hit, half a voxel towards the ray's side.
+      if (m_scene.materials[hit->surface.material].isDelta())
+        hitRadiance = continueSpecular(hit->surface, d, tanHalf, depth);
+      else
+        hitRadiance = m_field.coneSample(hit->position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);

@@ -215,10 +215,12 @@ TEST(VoxelCone, EveryRegionOfCornellBoxMatchesConvergedPathButTheShortBlocksFron
 
 TEST(VoxelCone, EveryRegionOfAGlassBallSceneMatchesConvergedPath) {
   // cornell-box with a glass ball for the short block: its caustic, its shadow and the room seen
-  // through it. Measured: within 6% but the bottom row (the floor around the ball and its
-  // shadow, -4% to -12%, the most beside the green wall): bounded at 15%.
+  // through it. Measured: within 8% (the top-left cell +7.7%, the ball's +6.1%, the bottom row
+  // -2% to -3%): bounded at 10%. While the glass was a black occluder in the field the bottom
+  // row (the floor around the ball and in its shadow, lit through it) was -4% to -11%; with
+  // cones continued through it exactly but its voxels still occluding, -3% to -7%.
   const std::vector<double> r = regionRatiosAgainstPath(cornellGlassBall());
-  for (size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(r[i], 1.0, 0.15) << "cell " << i % 4 << ", " << i / 4;
+  for (size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(r[i], 1.0, 0.1) << "cell " << i % 4 << ", " << i / 4;
 }
 
 /// A lit floor (4 x 4, albedo 0.8) and a square occluder (1 x 1, albedo 0.8) 0.5 above its
@@ -281,6 +283,39 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
     // (-45% / -54% without the field's margin); narrow cones +5.9% / +7.4%.
     EXPECT_NEAR(ratio({{"gather", "hit"}, {"cones", 64}}), 1.0f, 0.1f);
     EXPECT_LT(ratio({{"gather", "hit"}}), 0.95f);
+  }
+}
+
+/// A glass ball (radius 1, index 1.5, centre 1.2 above the floor) under a small area light (0.5
+/// x 0.5, 4 above the floor): the floor under the ball lies in its shadow and is lit only
+/// through it, by the caustic (light -> glass -> glass -> floor); the lens focuses 3.2 below
+/// its centre, so the floor 1.2 below meets a soft disc about 0.6 across.
+Scene glassBallCaustic() {
+  return parseScene(R"({
+    "camera": {"position": [0, 3, -5], "target": [0, 0.5, 0], "up": [0, 1, 0], "fov_y_deg": 40},
+    "render": {"width": 8, "height": 8, "spp": 1, "max_depth": 16},
+    "materials": {"white": {"type": "lambertian", "albedo": 0.8}, "glass": {"type": "dielectric", "ior": 1.5},
+                  "light": {"type": "lambertian", "albedo": 0, "emission": [60, 60, 60]}},
+    "shapes": [
+      {"type": "quad", "material": "white", "vertices": [[3, 0, -3], [-3, 0, -3], [-3, 0, 3], [3, 0, 3]]},
+      {"type": "sphere", "material": "glass", "center": [0, 1.2, 0], "radius": 1, "subdivisions": 5},
+      {"type": "quad", "material": "light",
+       "vertices": [[0.25, 4, -0.25], [0.25, 4, 0.25], [-0.25, 4, 0.25], [-0.25, 4, -0.25]]}]
+  })", "glass-ball-caustic", ".");
+}
+
+TEST(VoxelCone, AGlassBallsCausticMatchesPath) {
+  // Floor points under the ball, seen from just below it (the ball's lowest point is 0.2 up):
+  // path tracing finds the caustic by BSDF sampling through the glass onto the light (200k
+  // paths per point); voxcone takes it from the caustic grid of aimed caustic photons.
+  // Measured +2.3%, -12.7%, -6.7% at the three points (the caustic grid's footprint, 0.08
+  // across at level 6, softens the disc's bright rim): bounded at 15%.
+  const Scene scene = glassBallCaustic();
+  for (const Vec2 at : {Vec2(0.0f, 0.0f), Vec2(0.25f, 0.0f), Vec2(0.0f, -0.4f)}) {
+    const float ref = floorRadiance(scene, "path", nlohmann::json::object(), at.x, at.y, 200000).x;
+    ASSERT_GT(ref, 0.0f);
+    const float vc = floorRadiance(scene, "voxcone", {{"caustic_photons", 200000}}, at.x, at.y, 64).x;
+    EXPECT_NEAR(vc / ref, 1.0f, 0.15f) << "at " << at.x << ", " << at.y << ": path " << ref;
   }
 }
 

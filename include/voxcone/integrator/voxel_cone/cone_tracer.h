@@ -6,6 +6,7 @@
 
 #include "voxcone/core/bounds.h"
 #include "voxcone/core/math.h"
+#include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
 
 #include <optional>
@@ -30,6 +31,10 @@ constexpr float kClearance = 2.5980762f;
 /// it): this many finest voxels above the shading point, clear of the centres of its own
 /// surface's finest voxels (within sqrt(3)/2 v0 of it). (kClearance here cost the dragon 0.16 dB.)
 constexpr float kApexLift = 1.0f + 0.8660254f;
+/// Mirror and glass hits a cone continues through (reflected and refracted cones), and the
+/// smallest lobe weight followed.
+constexpr int kMaxSpecularDepth = 4;
+constexpr float kSpecularCut = 1e-2f;
 /// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
 constexpr float kOpaque = 0.99f;
 
@@ -41,8 +46,11 @@ public:
   ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings);
   /// The radiance one cone gathers from surface point p (rounding error pError, unit normal n
   /// on the side the cone leaves, unit direction d; dot(n, d) <= 0 gathers nothing), half-angle
-  /// atan(tanHalf).
-  Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf) const;
+  /// atan(tanHalf). Where the axis's exact ray meets a mirror or glass (delta materials), the
+  /// cone's light there is what cones along its reflected and refracted directions gather
+  /// from the hit, weighted by the lobes (`depth`: specular hits so far, up to
+  /// kMaxSpecularDepth).
+  Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, int depth = 0) const;
   float finestVoxel() const { return m_v0; }  ///< world units
   /// Per-axis variance of a cone's cross-section at unit distance along its axis, for
   /// directions uniform over its solid angle (half-angle atan(tanHalf)).
@@ -55,7 +63,10 @@ private:
   struct AxisHit {
     float t = 0.0f;
     Vec3 position{0.0f}, side{0.0f};
+    SurfaceHit surface;
   };
+  /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
+  Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const;
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
                                       float tMax) const;
 
