@@ -20,16 +20,60 @@
 #include <limits>
 #include <memory>
 #include <new>
+#include <optional>
+
+#include <smmintrin.h>
 
 namespace voxcone {
 
 namespace {
 
-/// A triangle's bounds and centroid during the build.
-struct PrimRef {
-  Bounds3 box;
-  Vec3 centroid;
-  uint32_t id;
+/// A triangle's bounds during the build, as two SSE vectors (32 bytes; the id in lo's w lane,
+/// by its bits). lo + hi is twice the centroid: binning works on it directly.
+struct alignas(16) PrimRef {
+  __m128 lo, hi;
+  uint32_t id() const { return uint32_t(_mm_cvtsi128_si32(_mm_castps_si128(_mm_shuffle_ps(lo, lo, 0xff)))); }
+  Bounds3 box() const {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, lo);
+    _mm_store_ps(h, hi);
+    Bounds3 b;
+    b.lo = Vec3(l[0], l[1], l[2]);
+    b.hi = Vec3(h[0], h[1], h[2]);
+    return b;
+  }
+};
+
+/// An axis-aligned box as two SSE vectors (w lanes unused), empty when lo > hi.
+struct Box4 {
+  __m128 lo = _mm_set1_ps(kInf), hi = _mm_set1_ps(-kInf);
+  void extend(__m128 l, __m128 h) {
+    lo = _mm_min_ps(lo, l);
+    hi = _mm_max_ps(hi, h);
+  }
+  void extend(const Box4& b) { extend(b.lo, b.hi); }
+  Bounds3 bounds() const {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, lo);
+    _mm_store_ps(h, hi);
+    Bounds3 b;
+    b.lo = Vec3(l[0], l[1], l[2]);
+    b.hi = Vec3(h[0], h[1], h[2]);
+    return b;
+  }
+  /// Surface area (0 when empty).
+  float area() const {
+    alignas(16) float d[4];
+    _mm_store_ps(d, _mm_sub_ps(hi, lo));
+    if (d[0] < 0.0f || d[1] < 0.0f || d[2] < 0.0f) return 0.0f;
+    return 2.0f * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]);
+  }
+};
+
+/// A node's range with its bounds and the bounds of its doubled centroids (lo + hi).
+struct Range {
+  uint32_t begin = 0, end = 0;
+  Box4 box, centroids2;
 };
 
 struct BuildNode {
@@ -40,6 +84,50 @@ struct BuildNode {
 };
 
 constexpr int kMaxDepth = 60;  // binary depth; the 4-wide tree is shallower, stacks hold 3 per level
+constexpr int kMaxBins = 256;
+/// Ranges at least this large are binned in parallel chunks (merged exactly: min, max, counts).
+constexpr uint32_t kParallelBinning = 65536;
+
+/// Per axis and bin: the bounds of the primitives whose centroid falls in it, and their count.
+struct Bins {
+  Box4 box[3][kMaxBins];
+  uint32_t count[3][kMaxBins];
+  explicit Bins(int bins) { clear(bins); }
+  void clear(int bins) {
+    for (int a = 0; a < 3; ++a)
+      for (int i = 0; i < bins; ++i) {
+        box[a][i] = Box4();
+        count[a][i] = 0;
+      }
+  }
+};
+
+/// The bin of a doubled centroid per axis: floor((c2 - c2lo) * scale) clamped to [0, bins - 1],
+/// in SSE (the same arithmetic for binning and for the partition, so both agree).
+struct BinMap {
+  __m128 base, scale, top;
+  BinMap(const Box4& centroids2, int bins) {
+    alignas(16) float lo[4], hi[4], sc[4];
+    _mm_store_ps(lo, centroids2.lo);
+    _mm_store_ps(hi, centroids2.hi);
+    for (int a = 0; a < 4; ++a) {
+      const float extent = a < 3 ? hi[a] - lo[a] : 0.0f;
+      sc[a] = extent > 0.0f ? float(bins) / extent : 0.0f;
+    }
+    base = centroids2.lo;
+    scale = _mm_load_ps(sc);
+    top = _mm_set1_ps(float(bins - 1));
+  }
+  __m128i bins(const PrimRef& r) const {
+    const __m128 f = _mm_mul_ps(_mm_sub_ps(_mm_add_ps(r.lo, r.hi), base), scale);
+    return _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(f, _mm_setzero_ps()), top));
+  }
+  bool splittable(int axis) const {
+    alignas(16) float sc[4];
+    _mm_store_ps(sc, scale);
+    return sc[axis] > 0.0f;
+  }
+};
 
 class Builder {
 public:
@@ -47,18 +135,39 @@ public:
 
   std::vector<PrimRef> refs;
 
-  std::unique_ptr<BuildNode> build(uint32_t begin, uint32_t end, int depth) {
+  /// The root's range: its bounds from every reference.
+  Range rootRange() const {
+    auto body = [&](const tbb::blocked_range<uint32_t>& r, Range acc) {
+      for (uint32_t i = r.begin(); i < r.end(); ++i) {
+        acc.box.extend(refs[i].lo, refs[i].hi);
+        const __m128 c2 = _mm_add_ps(refs[i].lo, refs[i].hi);
+        acc.centroids2.extend(c2, c2);
+      }
+      return acc;
+    };
+    Range all = tbb::parallel_reduce(tbb::blocked_range<uint32_t>(0, uint32_t(refs.size()), 16384), Range(), body,
+                                     [](Range a, const Range& b) {
+                                       a.box.extend(b.box);
+                                       a.centroids2.extend(b.centroids2);
+                                       return a;
+                                     });
+    all.begin = 0;
+    all.end = uint32_t(refs.size());
+    return all;
+  }
+
+  std::unique_ptr<BuildNode> build(const Range& range, int depth) {
     auto node = std::make_unique<BuildNode>();
-    const auto [box, cbox] = rangeBounds(begin, end);
-    node->box = box;
+    const uint32_t begin = range.begin, end = range.end, count = end - begin;
+    node->box = range.box.bounds();
     node->first = begin;
-    node->count = end - begin;
-    const uint32_t count = end - begin;
+    node->count = count;
 
     const float leafCost = m_s.intersectionCost * static_cast<float>(packets(count));
     int bestAxis = -1, bestSplit = -1;
     float bestCost = kInf;
-    if (count > 1 && depth < kMaxDepth) findSplit(begin, end, box, cbox, bestAxis, bestSplit, bestCost);
+    const BinMap map(range.centroids2, m_s.binCount);
+    if (count > 1 && depth < kMaxDepth) findSplit(range, map, bestAxis, bestSplit, bestCost);
 
     // Past kMaxDepth only oversized leaves are split further, at the median: the depth stays
     // below kMaxDepth + log2(triangles).
@@ -67,33 +176,16 @@ public:
       if (m_progress) m_progress->advance(count);
       return node;
     }
-    uint32_t mid;
-    if (bestAxis >= 0) {
-      const int bins = m_s.binCount;
-      const float lo = cbox.lo[bestAxis];
-      const float scale = static_cast<float>(bins) / (cbox.hi[bestAxis] - lo);
-      auto it = std::partition(refs.begin() + begin, refs.begin() + end, [&](const PrimRef& r) {
-        return binOf(r.centroid[bestAxis], lo, scale, bins) < bestSplit;
-      });
-      mid = static_cast<uint32_t>(it - refs.begin());
-    } else {
-      // Every centroid coincides (or no split helps yet the leaf would be too big): split the
-      // range in its middle, ordered by the largest centroid axis for a stable result.
-      const int axis = maxDimension(cbox.diagonal());
-      mid = begin + count / 2;
-      std::nth_element(refs.begin() + begin, refs.begin() + mid, refs.begin() + end,
-                       [axis](const PrimRef& a, const PrimRef& b) {
-                         return a.centroid[axis] < b.centroid[axis] || (a.centroid[axis] == b.centroid[axis] && a.id < b.id);
-                       });
-    }
-    if (mid == begin || mid == end) mid = begin + count / 2;
+    Range left, right;
+    if (bestAxis >= 0) partition(range, map, bestAxis, bestSplit, left, right);
+    if (bestAxis < 0 || left.end == begin || left.end == end) medianSplit(range, left, right);
 
     if (count >= static_cast<uint32_t>(m_s.parallelThreshold)) {
-      tbb::parallel_invoke([&] { node->left = build(begin, mid, depth + 1); },
-                           [&] { node->right = build(mid, end, depth + 1); });
+      tbb::parallel_invoke([&] { node->left = build(left, depth + 1); },
+                           [&] { node->right = build(right, depth + 1); });
     } else {
-      node->left = build(begin, mid, depth + 1);
-      node->right = build(mid, end, depth + 1);
+      node->left = build(left, depth + 1);
+      node->right = build(right, depth + 1);
     }
     return node;
   }
@@ -102,77 +194,74 @@ private:
   /// Number of 4-triangle packets holding n triangles.
   static uint32_t packets(uint32_t n) { return (n + 3u) / 4u; }
 
-  static int binOf(float c, float lo, float scale, int bins) {
-    const int b = static_cast<int>((c - lo) * scale);
-    return std::clamp(b, 0, bins - 1);
-  }
-
-  std::pair<Bounds3, Bounds3> rangeBounds(uint32_t begin, uint32_t end) const {
-    using Pair = std::pair<Bounds3, Bounds3>;
-    auto body = [&](const tbb::blocked_range<uint32_t>& r, Pair acc) {
-      for (uint32_t i = r.begin(); i < r.end(); ++i) {
-        acc.first.extend(refs[i].box);
-        acc.second.extend(refs[i].centroid);
-      }
-      return acc;
-    };
-    if (end - begin < 65536u) return body(tbb::blocked_range<uint32_t>(begin, end), Pair());
-    return tbb::parallel_reduce(tbb::blocked_range<uint32_t>(begin, end, 16384), Pair(), body,
-                                [](Pair a, const Pair& b) {
-                                  a.first.extend(b.first);
-                                  a.second.extend(b.second);
-                                  return a;
-                                });
-  }
-
-  /// Binned SAH over the three axes: the split plane of least cost. One pass bins every
-  /// primitive on all three axes; only the `binCount` bins in use are cleared (clearing all 256
-  /// per node dominated the build).
-  void findSplit(uint32_t begin, uint32_t end, const Bounds3& box, const Bounds3& cbox, int& bestAxis,
-                 int& bestSplit, float& bestCost) const {
-    const int bins = m_s.binCount;
-    const float invArea = 1.0f / std::max(box.area(), 1e-30f);
-    // Plain storage: Bounds3's member initializers would clear all 3 x 256 bins per call.
-    struct Bin {
-      Bounds3 box;
-      uint32_t count;
-    };
-    alignas(Bin) unsigned char storage[3][256][sizeof(Bin)];
-    auto bin = [&storage](int axis, int i) -> Bin& { return *reinterpret_cast<Bin*>(storage[axis][i]); };
-    Vec3 scale(0.0f);
-    bool splittable[3];
-    for (int axis = 0; axis < 3; ++axis) {
-      const float extent = cbox.hi[axis] - cbox.lo[axis];
-      splittable[axis] = extent > 0.0f;
-      scale[axis] = splittable[axis] ? static_cast<float>(bins) / extent : 0.0f;
-      for (int i = 0; i < bins; ++i) new (storage[axis][i]) Bin{Bounds3(), 0u};
-    }
+  /// Bin refs[begin, end) on all three axes into `bins` (SSE: one bin index per axis at once).
+  void binRange(uint32_t begin, uint32_t end, const BinMap& map, Bins& bins) const {
+    alignas(16) int32_t idx[4];
     for (uint32_t i = begin; i < end; ++i) {
       const PrimRef& r = refs[i];
-      for (int axis = 0; axis < 3; ++axis) {
-        Bin& b = bin(axis, binOf(r.centroid[axis], cbox.lo[axis], scale[axis], bins));
-        b.box.extend(r.box);
-        ++b.count;
+      _mm_store_si128(reinterpret_cast<__m128i*>(idx), map.bins(r));
+      for (int a = 0; a < 3; ++a) {
+        bins.box[a][idx[a]].extend(r.lo, r.hi);
+        ++bins.count[a][idx[a]];
       }
     }
+  }
+
+  /// Binned SAH over the three axes: the split plane of least cost. Large ranges are binned in
+  /// parallel chunks and merged (exact: the same bins at any thread count).
+  void findSplit(const Range& range, const BinMap& map, int& bestAxis, int& bestSplit, float& bestCost) const {
+    const int nb = m_s.binCount;
+    const float invArea = 1.0f / std::max(range.box.area(), 1e-30f);
+    // Bins for a chunk of the range; chunks are joined by min, max and sums: exact.
+    struct Body {
+      const Builder& builder;
+      const BinMap& map;
+      int nb;
+      std::unique_ptr<Bins> bins;
+      Body(const Builder& b, const BinMap& m, int n) : builder(b), map(m), nb(n), bins(std::make_unique<Bins>(n)) {}
+      Body(Body& o, tbb::split) : builder(o.builder), map(o.map), nb(o.nb), bins(std::make_unique<Bins>(o.nb)) {}
+      void operator()(const tbb::blocked_range<uint32_t>& r) { builder.binRange(r.begin(), r.end(), map, *bins); }
+      void join(const Body& o) {
+        for (int ax = 0; ax < 3; ++ax)
+          for (int i = 0; i < nb; ++i) {
+            bins->box[ax][i].extend(o.bins->box[ax][i]);
+            bins->count[ax][i] += o.bins->count[ax][i];
+          }
+      }
+    };
+    // Small ranges (nearly every node) bin into this thread's scratch bins: binRange runs no
+    // TBB work, so nothing else can use them meanwhile.
+    thread_local std::unique_ptr<Bins> scratch;
+    std::optional<Body> body;
+    const Bins* bins;
+    if (range.end - range.begin >= kParallelBinning) {
+      body.emplace(*this, map, nb);
+      tbb::parallel_reduce(tbb::blocked_range<uint32_t>(range.begin, range.end, 16384), *body);
+      bins = body->bins.get();
+    } else {
+      if (!scratch) scratch = std::make_unique<Bins>(nb);
+      else scratch->clear(nb);
+      binRange(range.begin, range.end, map, *scratch);
+      bins = scratch.get();
+    }
     for (int axis = 0; axis < 3; ++axis) {
-      if (!splittable[axis]) continue;
+      if (!map.splittable(axis)) continue;
       // Sweep from the right to get the right-hand areas, then from the left.
-      std::array<float, 256> rightArea;
-      std::array<uint32_t, 256> rightCount;
-      Bounds3 acc;
+      std::array<float, kMaxBins> rightArea;
+      std::array<uint32_t, kMaxBins> rightCount;
+      Box4 acc;
       uint32_t n = 0;
-      for (int i = bins - 1; i > 0; --i) {
-        acc.extend(bin(axis, i).box);
-        n += bin(axis, i).count;
+      for (int i = nb - 1; i > 0; --i) {
+        acc.extend(bins->box[axis][i]);
+        n += bins->count[axis][i];
         rightArea[i] = acc.area();
         rightCount[i] = n;
       }
-      acc = Bounds3();
+      acc = Box4();
       n = 0;
-      for (int i = 1; i < bins; ++i) {
-        acc.extend(bin(axis, i - 1).box);
-        n += bin(axis, i - 1).count;
+      for (int i = 1; i < nb; ++i) {
+        acc.extend(bins->box[axis][i - 1]);
+        n += bins->count[axis][i - 1];
         if (n == 0 || rightCount[i] == 0) continue;
         const float cost = m_s.traversalCost +
                            m_s.intersectionCost * invArea *
@@ -186,6 +275,56 @@ private:
     }
   }
 
+  /// Split `range` in place at bin `split` of `axis` (left: bins below it), the children's
+  /// bounds gathered on the way (no separate pass over each child).
+  void partition(const Range& range, const BinMap& map, int axis, int split, Range& left, Range& right) {
+    alignas(16) int32_t idx[4];
+    auto isLeft = [&](const PrimRef& r) {
+      _mm_store_si128(reinterpret_cast<__m128i*>(idx), map.bins(r));
+      return idx[axis] < split;
+    };
+    auto add = [](Range& to, const PrimRef& r) {
+      to.box.extend(r.lo, r.hi);
+      const __m128 c2 = _mm_add_ps(r.lo, r.hi);
+      to.centroids2.extend(c2, c2);
+    };
+    uint32_t i = range.begin, j = range.end;
+    while (true) {
+      while (i < j && isLeft(refs[i])) add(left, refs[i++]);
+      while (i < j && !isLeft(refs[j - 1])) add(right, refs[--j]);
+      if (i >= j) break;
+      std::swap(refs[i], refs[j - 1]);
+      add(left, refs[i++]);
+      add(right, refs[--j]);
+    }
+    left.begin = range.begin;
+    left.end = right.begin = i;
+    right.end = range.end;
+  }
+
+  /// Every centroid coincides (or no split helps yet the leaf would be too big): split the
+  /// range in its middle, ordered by the largest centroid axis (then id) for a stable result.
+  void medianSplit(const Range& range, Range& left, Range& right) {
+    const Bounds3 c = range.centroids2.bounds();
+    const int axis = maxDimension(c.diagonal());
+    const uint32_t mid = range.begin + (range.end - range.begin) / 2;
+    auto key = [axis](const PrimRef& r) { return r.box().center()[axis]; };
+    std::nth_element(refs.begin() + range.begin, refs.begin() + mid, refs.begin() + range.end,
+                     [&](const PrimRef& a, const PrimRef& b) {
+                       return key(a) < key(b) || (key(a) == key(b) && a.id() < b.id());
+                     });
+    left = Range();
+    right = Range();
+    for (uint32_t i = range.begin; i < range.end; ++i) {
+      Range& to = i < mid ? left : right;
+      to.box.extend(refs[i].lo, refs[i].hi);
+      const __m128 c2 = _mm_add_ps(refs[i].lo, refs[i].hi);
+      to.centroids2.extend(c2, c2);
+    }
+    left.begin = range.begin;
+    left.end = right.begin = mid;
+    right.end = range.end;
+  }
 
   const HbvhBuildSettings& m_s;
   Progress* m_progress;
@@ -262,7 +401,7 @@ struct Hbvh::Flattener {
         const uint32_t first = static_cast<uint32_t>(bvh.m_tris.size());
         const uint32_t count = (c.count + 3u) / 4u;
         uint32_t ids[64];  // maxLeafSize <= 64
-        for (uint32_t j = 0; j < c.count; ++j) ids[j] = refs[c.first + j].id;
+        for (uint32_t j = 0; j < c.count; ++j) ids[j] = refs[c.first + j].id();
         packTriangles(pos, tris, ids, c.count, bvh.m_tris);
         node.child[i] = kLeafBit | ((count - 1u) << kCountShift) | first;
         ++leaves;
@@ -286,7 +425,7 @@ struct Hbvh::Flattener {
     const Vec3 c = n.box.center();
     float r2 = 0.0f;
     for (uint32_t i = n.first; i < n.first + n.count; ++i) {
-      const UVec3& t = tris[refs[i].id];
+      const UVec3& t = tris[refs[i].id()];
       for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(pos[t[k]] - c, pos[t[k]] - c));
     }
     // Inflate by a relative 1e-5 so that float rounding in the sphere test never culls what
@@ -346,10 +485,12 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // References for every triangle with finite, indexable vertices.
   builder.refs.reserve(triangles.size());
   for (uint32_t i = 0; i < triangles.size(); ++i) {
+    Bounds3 box;
+    if (!triangleBounds(positions, triangles[i], box)) continue;
     PrimRef r;
-    if (!triangleBounds(positions, triangles[i], r.box)) continue;
-    r.centroid = r.box.center();
-    r.id = i;
+    r.lo = _mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f);
+    r.lo = _mm_castsi128_ps(_mm_insert_epi32(_mm_castps_si128(r.lo), int32_t(i), 3));
+    r.hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
     builder.refs.push_back(r);
   }
   if (progress) progress->start("hbvh", builder.refs.size());
@@ -363,7 +504,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
     m_stats.buildSeconds = timer.seconds();
     return;
   }
-  std::unique_ptr<BuildNode> root = builder.build(0, static_cast<uint32_t>(builder.refs.size()), 0);
+  std::unique_ptr<BuildNode> root = builder.build(builder.rootRange(), 0);
 
   // Collapse to 4 children per node and flatten depth first.
   m_tris.reserve(builder.refs.size() / 2);
