@@ -11,12 +11,16 @@
 #include "voxcone/scene/scene.h"
 
 #include <nlohmann/json.hpp>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/blocked_range.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <new>
@@ -31,6 +35,7 @@ namespace {
 /// A triangle's bounds during the build, as two SSE vectors (32 bytes; the id in lo's w lane,
 /// by its bits). lo + hi is twice the centroid: binning works on it directly.
 struct alignas(16) PrimRef {
+  PrimRef() {}  // filled in parallel right after the array is sized: no zeroing first
   __m128 lo, hi;
   uint32_t id() const { return uint32_t(_mm_cvtsi128_si32(_mm_castps_si128(_mm_shuffle_ps(lo, lo, 0xff)))); }
   Bounds3 box() const {
@@ -78,8 +83,11 @@ struct Range {
 
 struct BuildNode {
   Bounds3 box;
+  /// No vertex of the subtree lies farther than this from box.center(): exact at leaves, from
+  /// the children's bounds above (Builder::reach), for the bounding spheres.
+  float reach = 0.0f;
   uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
-  std::unique_ptr<BuildNode> left, right;
+  BuildNode *left = nullptr, *right = nullptr;  // in the builder's arena
   bool leaf() const { return !left; }
 };
 
@@ -131,9 +139,13 @@ struct BinMap {
 
 class Builder {
 public:
-  Builder(const HbvhBuildSettings& s, Progress* p) : m_s(s), m_progress(p) {}
+  Builder(const HbvhBuildSettings& s, const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, Progress* p)
+      : m_s(s), m_pos(pos), m_tris(tris), m_progress(p) {}
 
   std::vector<PrimRef> refs;
+  /// Build nodes, per thread (stable addresses; freed together: 337k nodes for the dragon
+  /// were 337k allocations and a recursive free).
+  tbb::enumerable_thread_specific<std::deque<BuildNode>> arena;
 
   /// The root's range: its bounds from every reference.
   Range rootRange() const {
@@ -156,8 +168,8 @@ public:
     return all;
   }
 
-  std::unique_ptr<BuildNode> build(const Range& range, int depth) {
-    auto node = std::make_unique<BuildNode>();
+  BuildNode* build(const Range& range, int depth) {
+    BuildNode* node = &arena.local().emplace_back();
     const uint32_t begin = range.begin, end = range.end, count = end - begin;
     node->box = range.box.bounds();
     node->first = begin;
@@ -167,13 +179,17 @@ public:
     int bestAxis = -1, bestSplit = -1;
     float bestCost = kInf;
     const BinMap map(range.centroids2, m_s.binCount);
-    if (count > 1 && depth < kMaxDepth) findSplit(range, map, bestAxis, bestSplit, bestCost);
-
     // Past kMaxDepth only oversized leaves are split further, at the median: the depth stays
     // below kMaxDepth + log2(triangles).
     const bool mustSplit = count > static_cast<uint32_t>(m_s.maxLeafSize);
+    // Every split costs at least the traversal step: where that alone is the leaf's cost (one
+    // packet at the default costs) the leaf wins without binning (the same tree, 8% faster).
+    const bool splitCanWin = mustSplit || m_s.traversalCost < leafCost;
+    if (count > 1 && depth < kMaxDepth && splitCanWin) findSplit(range, map, bestAxis, bestSplit, bestCost);
+
     if (count == 1 || (!mustSplit && (depth >= kMaxDepth || leafCost <= bestCost))) {
       if (m_progress) m_progress->advance(count);
+      node->reach = leafReach(*node);
       return node;
     }
     Range left, right;
@@ -187,10 +203,30 @@ public:
       node->left = build(left, depth + 1);
       node->right = build(right, depth + 1);
     }
+    node->reach = std::max(reach(*node, *node->left), reach(*node, *node->right));
     return node;
   }
 
 private:
+  /// The farthest vertex of a leaf from its box's centre.
+  float leafReach(const BuildNode& n) const {
+    const Vec3 c = n.box.center();
+    float r2 = 0.0f;
+    for (uint32_t i = n.first; i < n.first + n.count; ++i) {
+      const UVec3& t = m_tris[refs[i].id()];
+      for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(m_pos[t[k]] - c, m_pos[t[k]] - c));
+    }
+    return std::sqrt(r2);
+  }
+  /// A bound on the distance from parent's box centre to child's vertices: the child's own
+  /// reach from its centre, or its box's farthest corner, whichever is less. (Reading every
+  /// vertex of every candidate node, top levels included, was most of the flattening.)
+  static float reach(const BuildNode& parent, const BuildNode& child) {
+    const Vec3 c = parent.box.center();
+    const Vec3 far = glm::max(glm::abs(child.box.lo - c), glm::abs(child.box.hi - c));
+    return std::min(glm::length(child.box.center() - c) + child.reach, glm::length(far));
+  }
+
   /// Number of 4-triangle packets holding n triangles.
   static uint32_t packets(uint32_t n) { return (n + 3u) / 4u; }
 
@@ -327,6 +363,8 @@ private:
   }
 
   const HbvhBuildSettings& m_s;
+  const std::vector<Vec3>& m_pos;
+  const std::vector<UVec3>& m_tris;
   Progress* m_progress;
 };
 
@@ -334,104 +372,163 @@ private:
 
 /// Collapses the binary build tree into 4-wide nodes: each node takes its two children and
 /// repeatedly opens the inner child of largest surface area until it has four (the usual
-/// BVH2 -> BVH4 collapse; Wald et al. 2008, "Getting Rid of Packets").
+/// BVH2 -> BVH4 collapse; Wald et al. 2008, "Getting Rid of Packets"), laid out depth first.
+/// Two passes: `measure` counts every collapsed subtree's nodes, packets and spheres (bottom
+/// up, in parallel), so that `fill` can give each subtree its ranges of the arrays up front and
+/// write subtrees in parallel; the layout is the serial depth-first one, at any thread count.
 struct Hbvh::Flattener {
   Hbvh& bvh;
   const std::vector<PrimRef>& refs;
   const std::vector<Vec3>& pos;
   const std::vector<UVec3>& tris;
-  uint64_t leaves = 0, binaryNodes = 0;
-  int maxDepth = 0;
 
-  /// SAH cost of the binary subtree, relative to the root's area.
-  double sah(const BuildNode& n, float rootArea) {
+  /// One collapsed node: its children (binary build nodes) and its subtree's sizes.
+  struct Collapsed {
+    const BuildNode* kids[4] = {nullptr, nullptr, nullptr, nullptr};
+    int k = 0;
+    uint32_t nodes = 0, packets = 0, spheres = 0, leaves = 0;
+    int depth = 0;  ///< levels of Node4s below and including this one
+    std::unique_ptr<Collapsed> sub[4];  ///< for inner kids
+  };
+  /// Subtrees with more triangles than this are measured and filled as parallel tasks.
+  static constexpr uint32_t kParallelFill = 4096;
+
+  /// SAH cost of the binary subtree, relative to the root's area; counts binary nodes.
+  double sah(const BuildNode& n, float rootArea, uint64_t& binaryNodes) const {
     ++binaryNodes;
     const double rel = n.box.area() / rootArea;
     if (n.leaf()) return rel * bvh.m_settings.intersectionCost * ((n.count + 3u) / 4u);
-    return rel * bvh.m_settings.traversalCost + sah(*n.left, rootArea) + sah(*n.right, rootArea);
+    return rel * bvh.m_settings.traversalCost + sah(*n.left, rootArea, binaryNodes) +
+           sah(*n.right, rootArea, binaryNodes);
   }
 
-  uint32_t emitSubtree(const BuildNode& n, int depth) {
-    const BuildNode* kids[4] = {n.left.get(), n.right.get(), nullptr, nullptr};
-    int k = 2;
-    while (k < 4) {
-      int best = -1;
-      float bestArea = -1.0f;
-      for (int i = 0; i < k; ++i)
-        if (!kids[i]->leaf() && kids[i]->box.area() > bestArea) {
-          best = i;
-          bestArea = kids[i]->box.area();
-        }
-      if (best < 0) break;
-      const BuildNode* opened = kids[best];
-      kids[best] = opened->left.get();
-      kids[k++] = opened->right.get();
+  /// The collapse of inner node n (or a lone leaf as the root's only child), measured.
+  std::unique_ptr<Collapsed> measure(const BuildNode& n) const {
+    auto c = std::make_unique<Collapsed>();
+    if (n.leaf()) {
+      c->kids[0] = &n;
+      c->k = 1;
+    } else {
+      c->kids[0] = n.left;
+      c->kids[1] = n.right;
+      c->k = 2;
+      while (c->k < 4) {
+        int best = -1;
+        float bestArea = -1.0f;
+        for (int i = 0; i < c->k; ++i)
+          if (!c->kids[i]->leaf() && c->kids[i]->box.area() > bestArea) {
+            best = i;
+            bestArea = c->kids[i]->box.area();
+          }
+        if (best < 0) break;
+        const BuildNode* opened = c->kids[best];
+        c->kids[best] = opened->left;
+        c->kids[c->k++] = opened->right;
+      }
     }
-    return emitNode(kids, k, depth);
+    auto sub = [&](int i) { c->sub[i] = measure(*c->kids[i]); };
+    if (n.count > kParallelFill) {
+      tbb::parallel_for(0, c->k, [&](int i) {
+        if (!c->kids[i]->leaf()) sub(i);
+      });
+    } else {
+      for (int i = 0; i < c->k; ++i)
+        if (!c->kids[i]->leaf()) sub(i);
+    }
+    c->nodes = 1;
+    for (int i = 0; i < c->k; ++i) {
+      Sphere unused;
+      c->spheres += fitSphere(*c->kids[i], unused) ? 1u : 0u;
+      if (c->kids[i]->leaf()) {
+        c->packets += (c->kids[i]->count + 3u) / 4u;
+        ++c->leaves;
+      } else {
+        const Collapsed& s = *c->sub[i];
+        c->nodes += s.nodes;
+        c->packets += s.packets;
+        c->spheres += s.spheres;
+        c->leaves += s.leaves;
+        c->depth = std::max(c->depth, s.depth);
+      }
+    }
+    ++c->depth;
+    return c;
   }
 
-  uint32_t emitNode(const BuildNode* const* kids, int k, int depth) {
-    maxDepth = std::max(maxDepth, depth);
-    const uint32_t idx = static_cast<uint32_t>(bvh.m_nodes.size());
-    bvh.m_nodes.emplace_back();
-    Node4 node;
+  /// Write collapsed node c at node `node`, its spheres from `sphere`, its leaves' packets from
+  /// `packet`, and its inner kids' subtrees after it, in kid order (the serial depth-first
+  /// layout: node, then each kid's subtree; spheres of this node's kids, then the subtrees').
+  void fill(const Collapsed& c, uint32_t node, uint32_t sphere, uint32_t packet, uint32_t triangles) {
+    Node4 out;
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < 4; ++i) {
-        node.lo[a][i] = kInf;
-        node.hi[a][i] = -kInf;
+        out.lo[a][i] = kInf;
+        out.hi[a][i] = -kInf;
       }
-    node.sphereBase = static_cast<uint32_t>(bvh.m_spheres.size());
-    node.sphereMask = 0;
-    for (int i = 0; i < 4; ++i) node.child[i] = kLeafBit;  // empty slots are never entered
-    for (int i = 0; i < k; ++i) {
+    out.sphereBase = sphere;
+    out.sphereMask = 0;
+    for (int i = 0; i < 4; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
+    for (int i = 0; i < c.k; ++i) {
+      const BuildNode& kid = *c.kids[i];
       for (int a = 0; a < 3; ++a) {
-        node.lo[a][i] = kids[i]->box.lo[a];
-        node.hi[a][i] = kids[i]->box.hi[a];
+        out.lo[a][i] = kid.box.lo[a];
+        out.hi[a][i] = kid.box.hi[a];
       }
-      Sphere sphere;
-      if (fitSphere(*kids[i], sphere)) {
-        bvh.m_spheres.emplace_back(sphere.center, sphere.radius);
-        node.sphereMask |= 1u << i;
+      Sphere s;
+      if (fitSphere(kid, s)) {
+        bvh.m_spheres[sphere++] = Vec4(s.center, s.radius);
+        out.sphereMask |= 1u << i;
       }
     }
-    for (int i = 0; i < k; ++i) {
-      const BuildNode& c = *kids[i];
-      if (c.leaf()) {
-        // Pack the leaf's triangles four to a packet; NaN vertices fill the unused lanes.
-        const uint32_t first = static_cast<uint32_t>(bvh.m_tris.size());
-        const uint32_t count = (c.count + 3u) / 4u;
-        uint32_t ids[64];  // maxLeafSize <= 64
-        for (uint32_t j = 0; j < c.count; ++j) ids[j] = refs[c.first + j].id();
-        packTriangles(pos, tris, ids, c.count, bvh.m_tris);
-        node.child[i] = kLeafBit | ((count - 1u) << kCountShift) | first;
-        ++leaves;
+    // Where each kid's part starts.
+    uint32_t nextNode = node + 1;
+    uint32_t starts[4][3];  // node, sphere, packet
+    for (int i = 0; i < c.k; ++i) {
+      starts[i][0] = nextNode;
+      starts[i][1] = sphere;
+      starts[i][2] = packet;
+      if (c.kids[i]->leaf()) {
+        const uint32_t count = (c.kids[i]->count + 3u) / 4u;
+        out.child[i] = kLeafBit | ((count - 1u) << kCountShift) | packet;
+        packet += count;
       } else {
-        node.child[i] = emitSubtree(c, depth + 1);
+        const Collapsed& s = *c.sub[i];
+        out.child[i] = nextNode;
+        nextNode += s.nodes;
+        sphere += s.spheres;
+        packet += s.packets;
       }
     }
-    bvh.m_nodes[idx] = node;
-    return idx;
+    bvh.m_nodes[node] = out;
+    auto kid = [&](int i) {
+      const BuildNode& b = *c.kids[i];
+      if (b.leaf()) {
+        uint32_t ids[64];  // maxLeafSize <= 64
+        for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
+        packTriangles(pos, tris, ids, b.count, bvh.m_tris.data() + starts[i][2]);
+      } else {
+        fill(*c.sub[i], starts[i][0], starts[i][1], starts[i][2], c.kids[i]->count);
+      }
+    };
+    if (triangles > kParallelFill) tbb::parallel_for(0, c.k, kid);
+    else
+      for (int i = 0; i < c.k; ++i) kid(i);
   }
 
-  /// A sphere centred on the box, through the farthest vertex, when its surface area is below
+  /// A sphere centred on the box, of radius the subtree's reach (BuildNode::reach: the farthest
+  /// vertex at a leaf, a bound from the children's above), when its surface area is below
   /// sphereAreaRatio times the box's. A box touched on both faces of its widest axis needs a
-  /// sphere of diameter >= that extent, so most boxes are rejected before any vertex is read.
+  /// sphere of diameter >= that extent, so most boxes are rejected at once.
   bool fitSphere(const BuildNode& n, Sphere& out) const {
     const float ratio = bvh.m_settings.sphereAreaRatio;
     if (!(ratio > 0.0f)) return false;
     const float boxArea = n.box.area();
     const float widest = maxComponent(n.box.diagonal());
     if (kPi * widest * widest >= ratio * boxArea) return false;
-    const Vec3 c = n.box.center();
-    float r2 = 0.0f;
-    for (uint32_t i = n.first; i < n.first + n.count; ++i) {
-      const UVec3& t = tris[refs[i].id()];
-      for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(pos[t[k]] - c, pos[t[k]] - c));
-    }
     // Inflate by a relative 1e-5 so that float rounding in the sphere test never culls what
     // the box test keeps.
-    out.center = c;
-    out.radius = std::sqrt(r2) * (1.0f + 1e-5f) + 1e-30f;
+    out.center = n.box.center();
+    out.radius = n.reach * (1.0f + 1e-5f) + 1e-30f;
     return out.area() < ratio * boxArea;
   }
 };
@@ -480,19 +577,27 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
-  Builder builder(s, progress);
+  Builder builder(s, positions, triangles, progress);
 
   // References for every triangle with finite, indexable vertices.
-  builder.refs.reserve(triangles.size());
-  for (uint32_t i = 0; i < triangles.size(); ++i) {
-    Bounds3 box;
-    if (!triangleBounds(positions, triangles[i], box)) continue;
-    PrimRef r;
-    r.lo = _mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f);
-    r.lo = _mm_castsi128_ps(_mm_insert_epi32(_mm_castps_si128(r.lo), int32_t(i), 3));
-    r.hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
-    builder.refs.push_back(r);
-  }
+  // In parallel into every slot; a triangle that cannot be bounded leaves its slot invalid
+  // (id ~0), and the slots are compacted in order only when there is one.
+  std::vector<PrimRef>& refs = builder.refs;
+  refs.resize(triangles.size());
+  std::atomic<bool> anyInvalid{false};
+  tbb::parallel_for(tbb::blocked_range<uint32_t>(0, uint32_t(triangles.size()), 16384),
+                    [&](const tbb::blocked_range<uint32_t>& r) {
+                      for (uint32_t i = r.begin(); i < r.end(); ++i) {
+                        Bounds3 box;
+                        const bool ok = triangleBounds(positions, triangles[i], box);
+                        if (!ok) anyInvalid = true;
+                        refs[i].lo = _mm_castsi128_ps(_mm_insert_epi32(
+                            _mm_castps_si128(_mm_setr_ps(box.lo.x, box.lo.y, box.lo.z, 0.0f)), int32_t(ok ? i : ~0u), 3));
+                        refs[i].hi = _mm_setr_ps(box.hi.x, box.hi.y, box.hi.z, 0.0f);
+                      }
+                    });
+  if (anyInvalid)
+    refs.erase(std::remove_if(refs.begin(), refs.end(), [](const PrimRef& r) { return r.id() == ~0u; }), refs.end());
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
@@ -504,28 +609,28 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
     m_stats.buildSeconds = timer.seconds();
     return;
   }
-  std::unique_ptr<BuildNode> root = builder.build(builder.rootRange(), 0);
+  const BuildNode* root = builder.build(builder.rootRange(), 0);
 
   // Collapse to 4 children per node and flatten depth first.
-  m_tris.reserve(builder.refs.size() / 2);
   Flattener flat{*this, builder.refs, positions, triangles};
-  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f));
-  if (root->leaf()) {
-    // A single leaf still needs a node to hold its box.
-    const BuildNode* only[1] = {root.get()};
-    flat.emitNode(only, 1, 1);
-  } else {
-    flat.emitSubtree(*root, 1);
-  }
+  uint64_t binaryNodes = 0;
+  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f), binaryNodes);
+  // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
+  std::unique_ptr<Flattener::Collapsed> top = flat.measure(*root);
+  m_nodes.resize(top->nodes);
+  m_spheres.resize(top->spheres);
+  m_tris.resize(top->packets);
+  flat.fill(*top, 0, 0, 0, root->count);
   m_stats.nodes = m_nodes.size();
-  m_stats.leaves = flat.leaves;
-  m_stats.binaryNodes = flat.binaryNodes;
-  m_stats.maxDepth = flat.maxDepth;
+  m_stats.leaves = top->leaves;
+  m_stats.binaryNodes = binaryNodes;
+  m_stats.maxDepth = top->depth;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
   m_stats.bytes = m_nodes.size() * sizeof(Node4) + m_spheres.size() * sizeof(Vec4) + m_tris.size() * sizeof(Triangle4);
-  // Free the build tree in parallel-friendly order before timing stops.
-  root.reset();
+  // Free the build trees before timing stops.
+  builder.arena.clear();
+  top.reset();
   m_stats.buildSeconds = timer.seconds();
   if (progress) progress->finish();
 }
