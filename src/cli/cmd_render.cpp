@@ -192,6 +192,17 @@ void runRender(const RenderOptions& o) {
   std::printf("wrote %s (%s, %s)\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str());
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
               settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());
+  if (autoSettings && !autoReport.value("met", true)) {
+    char what[256];
+    if (o.targetError > 0.0)
+      std::snprintf(what, sizeof what, "--target-error %.4g: predicted relMSE %.4g after %d passes (%s); the image is written",
+                    o.targetError, autoReport.value("predicted_relmse", 0.0), autoReport["chosen"].value("passes", 0),
+                    autoReport.value("stopped_by", std::string()).c_str());
+    else
+      std::snprintf(what, sizeof what, "--time-budget %.3g s: took %.3g s for the 2 passes a prediction needs; the image is written",
+                    o.timeBudget, total.seconds());
+    throw NotMetError(what);
+  }
 }
 
 }  // namespace

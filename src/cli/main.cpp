@@ -23,6 +23,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
+  } catch (const voxcone::NotMetError& e) {
+    std::fprintf(stderr, "voxcone: not met: %s\n", e.what());
+    return 3;
   } catch (const voxcone::CancelledError&) {
     std::fprintf(stderr, "voxcone: interrupted; no output written\n");
     return 130;

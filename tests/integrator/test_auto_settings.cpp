@@ -19,6 +19,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <sys/wait.h>
+
 namespace voxcone {
 namespace {
 
@@ -171,6 +173,16 @@ TEST_F(AutoSettingsCli, RenderSaysWhatItDidAndRecordsIt) {
                             .c_str()),
             0);
   for (const char* name : {"b.json", "c.json", "d.json", "d.exr"}) EXPECT_FALSE(std::filesystem::exists(path(name))) << name;
+  // A budget the two passes overrun: the image is written, and the exit code (3) says the
+  // budget was not met.
+  const int status = std::system((cli + " render " + scene + " --res 32x32 --time-budget 0.001 -q -o " + path("e") +
+                                  " > /dev/null 2>&1")
+                                     .c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 3);
+  EXPECT_TRUE(std::filesystem::exists(path("e.exr")));
+  std::ifstream e(path("e.json"));
+  EXPECT_FALSE(nlohmann::json::parse(e)["auto"]["met"].get<bool>());
 }
 
 }  // namespace

@@ -38,6 +38,13 @@ public:
   using Error::Error;
 };
 
+/// The work was done and written, but what was asked of it was not reached (a render's
+/// --target-error or --time-budget): the CLI exits 3 with this message.
+class NotMetError : public Error {
+public:
+  using Error::Error;
+};
+
 /// A long stage was cancelled through its Progress object.
 class CancelledError : public Error {
 public:
