@@ -91,24 +91,30 @@ public:
   }
 
   /// An RGB value given as [r,g,b] or one number (grey).
-  Vec3 rgb(const std::string& key, const Vec3& def, float lo = 0.0f) {
+  /// A colour: one number for all three channels or an array of three, each in [lo, hi]
+  /// (reflectances: hi = 1, more would create energy).
+  Vec3 rgb(const std::string& key, const Vec3& def, float lo = 0.0f, float hi = kInf) {
     if (!has(key)) return def;
     const json& v = get(key);
     if (v.is_number()) {
-      const float f = number(key, 0.0f, lo);
+      const float f = number(key, 0.0f, lo, hi);
       return Vec3(f);
     }
-    return toVec3(v, child(key), lo);
+    return toVec3(v, child(key), lo, hi);
   }
 
-  Vec3 toVec3(const json& v, const std::string& path, float lo = -kInf) const {
+  Vec3 toVec3(const json& v, const std::string& path, float lo = -kInf, float hi = kInf) const {
     if (!v.is_array() || v.size() != 3) throw SceneError(m_file, path, "expected an array of 3 numbers");
     Vec3 r;
     for (int i = 0; i < 3; ++i) {
       if (!v[i].is_number()) throw SceneError(m_file, path, "expected an array of 3 numbers");
       const double d = v[i].get<double>();
       if (!std::isfinite(d)) throw SceneError(m_file, path, "not a finite number");
-      if (d < lo) throw SceneError(m_file, path, "component " + std::to_string(d) + " below " + std::to_string(lo));
+      if (d < lo || d > hi) {
+        std::ostringstream os;
+        os << "component " << i << " is " << d << ", out of range [" << lo << ", " << hi << "]";
+        throw SceneError(m_file, path, os.str());
+      }
       r[i] = static_cast<float>(d);
     }
     return r;
@@ -135,23 +141,23 @@ Material parseMaterial(Reader& r, const std::string& name) {
   const std::string type = r.string("type", "", true);
   if (type == "lambertian" || type == "diffuse") {
     m.type = MaterialType::Lambertian;
-    m.albedo = r.rgb("albedo", Vec3(0.5f));
+    m.albedo = r.rgb("albedo", Vec3(0.5f), 0.0f, 1.0f);
   } else if (type == "oren_nayar") {
     m.type = MaterialType::OrenNayar;
-    m.albedo = r.rgb("albedo", Vec3(0.5f));
+    m.albedo = r.rgb("albedo", Vec3(0.5f), 0.0f, 1.0f);
     m.sigmaRad = glm::radians(r.number("sigma_deg", 20.0f, 0.0f, 90.0f));
   } else if (type == "mirror") {
     m.type = MaterialType::Mirror;
-    m.specular = r.rgb("specular", Vec3(1.0f));
+    m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
   } else if (type == "dielectric" || type == "rough_dielectric") {
     m.type = type == "dielectric" ? MaterialType::Dielectric : MaterialType::RoughDielectric;
     m.ior = r.number("ior", 1.5f, 1.0001f, 10.0f);
-    m.specular = r.rgb("specular", Vec3(1.0f));
+    m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
   } else if (type == "conductor" || type == "rough_conductor") {
     m.type = type == "conductor" ? MaterialType::Conductor : MaterialType::RoughConductor;
     m.eta = r.vec3("eta", Vec3(0.2f), false, 0.0f);
     m.k = r.vec3("k", Vec3(3.0f), false, 0.0f);
-    m.specular = r.rgb("specular", Vec3(1.0f));
+    m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
   } else {
     r.fail("unknown material type '" + type +
                "' (lambertian, oren_nayar, mirror, dielectric, rough_dielectric, conductor, rough_conductor)",
@@ -447,6 +453,20 @@ Scene parseScene(const std::string& jsonText, const std::string& origin, const s
     // nlohmann's message: "[json.exception.parse_error.101] parse error at line 3, column 5: ..."
     const auto pos = msg.find("parse error");
     throw SceneError(origin, "", "invalid JSON: " + (pos == std::string::npos ? msg : msg.substr(pos)));
+  } catch (const json::out_of_range& e) {
+    // "[json.exception.out_of_range.406] number overflow parsing '1e999'": no position, so the
+    // number's first occurrence in the text gives the line.
+    const std::string msg = e.what();
+    const auto q0 = msg.find('\''), q1 = msg.rfind('\'');
+    std::string where;
+    if (q0 != std::string::npos && q1 > q0 + 1) {
+      const std::string token = msg.substr(q0 + 1, q1 - q0 - 1);
+      const auto at = jsonText.find(token);
+      if (at != std::string::npos)
+        where = " at line " + std::to_string(1 + std::count(jsonText.begin(), jsonText.begin() + long(at), '\n'));
+      where += ": " + token.substr(0, 32);
+    }
+    throw SceneError(origin, "", "invalid JSON: a number too large for a double" + where);
   }
   return SceneBuilder(origin, baseDir).build(root);
 }
