@@ -10,11 +10,27 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <charconv>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 namespace voxcone {
+
+const CLI::Validator& nonEmpty() {
+  static const CLI::Validator v([](std::string& s) { return s.empty() ? std::string("must not be empty") : std::string(); },
+                                "NONEMPTY");
+  return v;
+}
+
+uint64_t parseSeed(const std::string& option, const std::string& text) {
+  uint64_t v = 0;
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, v);
+  if (text.empty() || ec != std::errc() || ptr != end)
+    throw SettingsError(option + ": expected an integer in [0, 18446744073709551615], got '" + text.substr(0, 40) + "'");
+  return v;
+}
 
 std::string shellQuote(const std::string& s) {
   std::string r = "'";

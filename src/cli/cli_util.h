@@ -1,7 +1,11 @@
 #pragma once
-// Helpers of the subcommands that run voxcone itself in child processes (study, batch).
+// Helpers of the subcommands: option checks, and running voxcone itself in child processes
+// (study, batch).
 
+#include <CLI/CLI.hpp>
 #include <nlohmann/json_fwd.hpp>
+
+#include <cstdint>
 
 #include <string>
 
@@ -9,6 +13,14 @@ namespace voxcone {
 
 /// `s` quoted for /bin/sh.
 std::string shellQuote(const std::string& s);
+
+/// CLI11 check: the value must not be empty (an empty --method or -o would otherwise mean
+/// "not given" and silently fall back to a default).
+const CLI::Validator& nonEmpty();
+
+/// A seed: a decimal integer in [0, 2^64 - 1]; anything else (a sign, a fraction, more than 64
+/// bits) is a SettingsError naming `option`, never clamped.
+uint64_t parseSeed(const std::string& option, const std::string& text);
 
 /// Run `cmd` through /bin/sh and capture its stdout; returns the exit status (-1 when it did
 /// not exit normally). Throws Error when it cannot be started.

@@ -1,5 +1,6 @@
 // `voxcone render SCENE`: load, build the HBVH (or --accel), render, write EXR + PNG + JSON sidecar.
 
+#include "cli_util.h"
 #include "commands.h"
 #include "default_scene.h"
 #include "voxcone/accel/accel.h"
@@ -15,6 +16,7 @@
 
 #include <exception>
 #include <filesystem>
+#include <optional>
 #include <regex>
 
 namespace voxcone {
@@ -27,7 +29,7 @@ struct RenderOptions {
   std::string method;
   int spp = 0;
   std::string resolution;
-  int64_t seed = -1;
+  std::optional<uint64_t> seed;
   int threads = 0;
   int maxDepth = 0;
   std::string integratorOptions = "{}";
@@ -69,7 +71,7 @@ void runRender(const RenderOptions& o) {
   if (!o.method.empty()) settings.method = o.method;
   if (o.spp != 0) settings.spp = o.spp;
   if (!o.resolution.empty()) parseResolution(o.resolution, settings);
-  if (o.seed >= 0) settings.seed = static_cast<uint64_t>(o.seed);
+  if (o.seed) settings.seed = *o.seed;
   if (o.maxDepth != 0) settings.maxDepth = o.maxDepth;
   if (!o.sampler.empty()) settings.sampler = samplerKindFromName(o.sampler);
   settings.validate();
@@ -211,15 +213,17 @@ void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
   cmd->add_option("scene", o->scenePath, "Scene file (JSON); default: the built-in cornell-box");
-  cmd->add_option("-o,--output", o->output, "Output path; .exr/.png/.json are written beside it (default out/<scene>)");
+  cmd->add_option("-o,--output", o->output, "Output path; .exr/.png/.json are written beside it (default out/<scene>)")
+      ->check(nonEmpty());
   cmd->add_option("--method", o->method, "Integrator: " + [] {
     std::string s;
     for (const auto& n : integratorNames()) s += (s.empty() ? "" : "|") + n;
     return s;
-  }());
+  }())->check(nonEmpty());
   cmd->add_option("--spp", o->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 24));
   cmd->add_option("--res", o->resolution, "Resolution WIDTHxHEIGHT");
-  cmd->add_option("--seed", o->seed, "Random seed")->check(CLI::NonNegativeNumber);
+  cmd->add_option_function<std::string>(
+      "--seed", [o](const std::string& s) { o->seed = parseSeed("--seed", s); }, "Random seed, [0, 2^64 - 1]");
   cmd->add_option("--sampler", o->sampler, "Pixel sampler: sobol (default; Owen-scrambled) or independent")
       ->check(CLI::IsMember(samplerNames()));
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));

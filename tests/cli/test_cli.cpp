@@ -94,6 +94,11 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --options '{\"x\":1}' -o " + (d / "g").string(),
       "render " + scenes + "cornell-box.json -q --sampler halton -o " + (d / "h").string(),
       "render " + scenes + "cornell-box.json -q -o /nonexistent-dir/x",
+      // Not clamped to 2^63 - 1, not taken as "not given".
+      "render " + scenes + "cornell-box.json -q --seed 99999999999999999999 -o " + (d / "i").string(),
+      "render " + scenes + "cornell-box.json -q --seed -1 -o " + (d / "j").string(),
+      "render " + scenes + "cornell-box.json -q --method '' -o " + (d / "k").string(),
+      "render " + scenes + "cornell-box.json -q -o ''",
       "info /nonexistent.json",
       "compare /nonexistent1.exr /nonexistent2.exr",
   };
