@@ -59,6 +59,13 @@ void runCompare(const CompareArgs& args) {
   }
   const Image test = readImage(args.testPath);
   const Image ref = readImage(args.refPath);
+  // An 8-bit display image against a float one measures the clipping and quantization of the
+  // encoding, not the renderer (an EXR against its own PNG: relMSE 0.55, PSNR inf).
+  if (test.displayEncoded != ref.displayEncoded)
+    throw ImageError("cannot compare " + std::string(test.displayEncoded ? "an 8-bit display-encoded " : "a float ") +
+                     "image (" + args.testPath + ") with " +
+                     std::string(ref.displayEncoded ? "an 8-bit display-encoded " : "a float ") + "one (" + args.refPath +
+                     "): compare two EXRs, or two PNGs");
   const ImageMetrics m = compareImages(test, ref);
 
   if (!args.errorImagePath.empty()) {

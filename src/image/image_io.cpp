@@ -243,6 +243,7 @@ Image readImage(const std::string& path) {
 
   // One or two channels (grey, grey + alpha) are replicated to RGB; channels past RGB dropped.
   Image image(spec.width, spec.height);
+  image.displayEncoded = integer;
   for (size_t i = 0; i < npix; ++i) {
     const float* p = &buf[i * static_cast<size_t>(nch)];
     if (nch < 3) {

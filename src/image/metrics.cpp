@@ -42,6 +42,8 @@ void checkSizes(const Image& test, const Image& reference) {
     throw ImageError("compare: reference image is empty or inconsistent (" + describe(reference) + ")");
   if (test.width != reference.width || test.height != reference.height)
     throw ImageError("compare: size mismatch: test " + describe(test) + ", reference " + describe(reference));
+  if (test.displayEncoded != reference.displayEncoded)
+    throw ImageError("compare: one image is 8-bit display-encoded (PNG, JPEG), the other float: compare like with like");
 }
 
 /// Normalised 1D Gaussian of `taps` samples centred on the middle of the window.

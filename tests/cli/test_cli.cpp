@@ -114,6 +114,17 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 2);
 }
 
+TEST(Cli, CompareRefusesAFloatImageAgainstAnEightBitOne) {
+  // A render's EXR against its own PNG measured the PNG's clipping (relMSE 0.55, PSNR inf).
+  const fs::path d = freshDir("cli_compare_kinds");
+  const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
+  ASSERT_EQ(run("render " + scene + " -q --res 8x8 --spp 1 -o " + (d / "a").string()).code, 0);
+  const RunResult r = run("compare " + (d / "a.exr").string() + " " + (d / "a.png").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("8-bit display-encoded"), std::string::npos) << r.err;
+  EXPECT_EQ(run("compare " + (d / "a.png").string() + " " + (d / "a.png").string()).code, 0);
+}
+
 TEST(Cli, InfoPrintsHbvhStatistics) {
   const std::string out = ::testing::TempDir() + "/info.json";
   const std::string cmd = std::string(VOXCONE_CLI_PATH) + " info --json " + test::sourceDir() +

@@ -242,6 +242,12 @@ TEST(MetricsCompare, SizeMismatchOrEmptyThrows) {
   EXPECT_THROW(compareImages(Image(5, 4), Image(4, 4)), ImageError);
   EXPECT_THROW(compareImages(Image(), Image()), ImageError);
   EXPECT_THROW(falseColorError(Image(4, 4), Image(3, 4)), ImageError);
+  // An 8-bit display image (clipped, quantized) against a float one: not comparable.
+  Image png(4, 4);
+  png.displayEncoded = true;
+  EXPECT_THROW(compareImages(png, Image(4, 4)), ImageError);
+  EXPECT_THROW(relMseOfEstimates(Image(4, 4), png), ImageError);
+  EXPECT_NO_THROW(compareImages(png, png));
 }
 
 TEST(MetricsCompare, NonFiniteTestValuesGiveNonFiniteErrors) {
@@ -303,7 +309,10 @@ TEST(MetricsCompare, PngRoundTripIsLosslessIn8Bit) {
   Image im = randomCodes(12, 12, 5);
   for (auto& p : im.pixels) p *= 1.01f;
   writePng(file.string(), im);
-  const ImageMetrics m = compareImages(readImage(file.string()), im);
+  // Compared as what it was written as: 8-bit display-encoded (a float image is refused).
+  Image expected = im;
+  expected.displayEncoded = true;
+  const ImageMetrics m = compareImages(readImage(file.string()), expected);
   fs::remove(file);
   EXPECT_EQ(m.psnrSrgb8, std::numeric_limits<double>::infinity());
   EXPECT_DOUBLE_EQ(m.ssim, 1.0);

@@ -13,6 +13,9 @@ struct Image {
   int width = 0;
   int height = 0;
   std::vector<Vec3> pixels;
+  /// Read from an integer, display-encoded file (PNG, JPEG: decoded to linear, but clipped to
+  /// [0, 1] and quantized when it was written): not comparable with a float HDR image.
+  bool displayEncoded = false;
 
   Image() = default;
   Image(int w, int h, const Vec3& fill = Vec3(0.0f))

@@ -36,7 +36,8 @@ struct ImageMetrics {
 /// epsilon of relMse.
 constexpr double kRelMseEpsilon = 1e-2;
 
-/// Compare; throws ImageError if the sizes differ or either is empty.
+/// Compare; throws ImageError if the sizes differ, either is empty, or one is display-encoded
+/// (Image::displayEncoded) and the other not.
 ImageMetrics compareImages(const Image& test, const Image& reference);
 
 /// relMSE of two estimates of the same image against their mean: mean over pixels and channels
