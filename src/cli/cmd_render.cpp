@@ -14,6 +14,9 @@
 #include <nlohmann/json.hpp>
 #include <tbb/task_group.h>
 
+#include <cerrno>
+#include <cstring>
+#include <unistd.h>
 #include <exception>
 #include <filesystem>
 #include <optional>
@@ -46,6 +49,23 @@ void parseResolution(const std::string& s, RenderSettings& settings) {
   if (!std::regex_match(s, m, re)) throw SettingsError("--res expects WIDTHxHEIGHT (e.g. 256x256), got '" + s + "'");
   settings.width = std::stoi(m[1]);
   settings.height = std::stoi(m[2]);
+}
+
+/// Throws SettingsError unless <out>.exr, .png and .json can be written: none is a directory,
+/// and a file can be created in their folder (tried with a temporary, removed at once).
+void checkOutputsWritable(const std::filesystem::path& out) {
+  std::error_code ec;
+  if (out.filename().empty()) throw SettingsError("output " + out.string() + ": names a folder, not a file stem");
+  for (const char* e : {".exr", ".png", ".json"}) {
+    const std::filesystem::path p = out.string() + e;
+    if (std::filesystem::is_directory(p, ec)) throw SettingsError("cannot write " + p.string() + ": it is a directory");
+  }
+  const std::filesystem::path folder = out.parent_path().empty() ? std::filesystem::path(".") : out.parent_path();
+  const std::filesystem::path probe = folder / (".voxcone-probe-" + std::to_string(::getpid()));
+  FILE* f = std::fopen(probe.c_str(), "wb");
+  if (!f) throw SettingsError("cannot write into " + folder.string() + ": " + std::strerror(errno));
+  std::fclose(f);
+  std::filesystem::remove(probe, ec);
 }
 
 void runRender(const RenderOptions& o) {
@@ -100,6 +120,9 @@ void runRender(const RenderOptions& o) {
       if (std::filesystem::equivalent(out.string() + e, o.scenePath, ec))
         throw SettingsError("output " + out.string() + e + " would overwrite the scene file");
     }
+  // Every output writable before any work is done (a read-only folder, a directory where a
+  // file goes: found after the render, they left part of the set behind or wasted it).
+  checkOutputsWritable(out);
 
   t.reset();
   const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);

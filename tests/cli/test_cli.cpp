@@ -125,6 +125,20 @@ TEST(Cli, CompareRefusesAFloatImageAgainstAnEightBitOne) {
   EXPECT_EQ(run("compare " + (d / "a.png").string() + " " + (d / "a.png").string()).code, 0);
 }
 
+TEST(Cli, OutputsThatCannotBeWrittenFailBeforeTheRender) {
+  // A directory where the PNG goes, or -o naming a folder: refused before any work, nothing
+  // written (they used to fail after the render, the EXR left behind).
+  const fs::path d = freshDir("cli_outputs");
+  fs::create_directories(d / "x.png");
+  const std::string scene = test::sourceDir() + "/data/scenes/cornell-box.json";
+  for (const std::string& out : {(d / "x").string(), d.string() + "/"}) {
+    const RunResult r = run("render " + scene + " -q --res 8x8 --spp 1 -o " + out);
+    EXPECT_EQ(r.code, 2) << out;
+    EXPECT_NE(r.err.find(out.back() == '/' ? "names a folder" : "is a directory"), std::string::npos) << r.err;
+  }
+  EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 1);  // x.png/ alone
+}
+
 TEST(Cli, InfoPrintsHbvhStatistics) {
   const std::string out = ::testing::TempDir() + "/info.json";
   const std::string cmd = std::string(VOXCONE_CLI_PATH) + " info --json " + test::sourceDir() +
