@@ -18,6 +18,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <charconv>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -46,6 +48,27 @@ std::string firstLine(const std::string& text) {
 /// Counter making temporary names unique within one process (several threads may write).
 std::atomic<unsigned> g_tmpCounter{0};
 
+/// Remove temporaries of `target` (".<stem>.tmp-<pid>-<n><ext>") left by a process that no
+/// longer exists (killed with SIGKILL mid-write: nothing else would ever remove them).
+void removeStaleTemporaries(const fs::path& dir, const fs::path& target) {
+  const std::string prefix = "." + target.stem().string() + ".tmp-", ext = target.extension().string();
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() + ext.size() || name.compare(0, prefix.size(), prefix) != 0 ||
+        name.compare(name.size() - ext.size(), ext.size(), ext) != 0)
+      continue;
+    const std::string rest = name.substr(prefix.size());  // "<pid>-<n><ext>"
+    long pid = 0;
+    const auto [ptr, perr] = std::from_chars(rest.data(), rest.data() + rest.size(), pid);
+    if (perr != std::errc() || ptr == rest.data() || *ptr != '-' || pid <= 0) continue;
+    if (pid == long(::getpid())) continue;
+    if (::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or not ours to judge
+    std::error_code rm;
+    fs::remove(it->path(), rm);
+  }
+}
+
 /// writeFileAtomic throwing ErrorT, so that image writes report ImageError as documented.
 template <typename ErrorT>
 void atomicWrite(const std::string& path, const std::function<void(const std::string&)>& writer) {
@@ -57,6 +80,7 @@ void atomicWrite(const std::string& path, const std::function<void(const std::st
 
   // ".<stem>.tmp-<pid>-<counter><ext>": hidden, unique, and with the target's extension so that
   // OpenImageIO picks the same format for the temporary as for the target.
+  removeStaleTemporaries(dir, target);
   const std::string tmpName = "." + target.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
                               std::to_string(g_tmpCounter.fetch_add(1)) + target.extension().string();
   const std::string tmpPath = (dir / tmpName).string();

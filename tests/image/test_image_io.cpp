@@ -10,6 +10,7 @@
 #include "../support/temp_dir.h"
 #include <nlohmann/json.hpp>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -241,6 +242,22 @@ TEST_F(ImageIoTest, AtomicWriteTemporaryNaming) {
   EXPECT_EQ(tmp.extension(), ".bin");
   EXPECT_FALSE(fs::exists(tmp));
   EXPECT_EQ(entries(), std::vector<std::string>{"data.bin"});
+}
+
+TEST_F(ImageIoTest, StaleTemporariesOfDeadProcessesAreRemovedOnTheNextWrite) {
+  // A process killed with SIGKILL mid-write leaves its temporary; the next write of that target
+  // removes it. Temporaries of live processes (pid 1, this one) and of other targets stay.
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) ::_exit(0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);
+  const std::string dead = ".data.tmp-" + std::to_string(child) + "-0.bin";
+  const std::string live = ".data.tmp-1-0.bin", mine = ".data.tmp-" + std::to_string(::getpid()) + "-99.bin";
+  const std::string other = ".other.tmp-" + std::to_string(child) + "-0.bin";
+  for (const std::string& n : {dead, live, mine, other}) writeText(path(n), "stale");
+  writeFileAtomic(path("data.bin"), [&](const std::string& tmp) { writeText(tmp, "new"); });
+  EXPECT_FALSE(fs::exists(path(dead)));
+  for (const std::string& n : {live, mine, other}) EXPECT_TRUE(fs::exists(path(n))) << n;
 }
 
 TEST_F(ImageIoTest, AtomicWriterThrowLeavesNoFile) {
