@@ -7,10 +7,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include <fcntl.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <charconv>
+#include <cerrno>
+#include <csignal>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -39,12 +45,38 @@ std::string shellQuote(const std::string& s) {
 }
 
 int runCapture(const std::string& cmd, std::string& out) {
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) throw Error("cannot run: " + cmd);
+  // fork + exec instead of popen, so that the child gets SIGTERM when the thread waiting for it
+  // dies (PR_SET_PDEATHSIG; kept across exec): a batch killed with SIGKILL used to leave its
+  // render running and writing into the output folder. Commands that start with "exec" hand
+  // that on from the shell to the program.
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) throw Error("cannot run: " + cmd + ": " + std::strerror(errno));
+  const pid_t parent = ::getpid();
+  const char* command = cmd.c_str();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fds[0]);
+    ::close(fds[1]);
+    throw Error("cannot run: " + cmd + ": " + std::strerror(errno));
+  }
+  if (pid == 0) {  // only async-signal-safe calls until exec
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (::getppid() != parent) ::_exit(127);  // the parent died before prctl took effect
+    ::dup2(fds[1], STDOUT_FILENO);
+    ::execl("/bin/sh", "sh", "-c", command, static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::close(fds[1]);
   std::array<char, 4096> buf;
-  size_t n;
-  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  const int status = ::pclose(p);
+  for (;;) {
+    const ssize_t n = ::read(fds[0], buf.data(), buf.size());
+    if (n > 0) out.append(buf.data(), size_t(n));
+    else if (n == 0 || errno != EINTR) break;
+  }
+  ::close(fds[0]);
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
@@ -61,7 +93,7 @@ nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& 
   const std::string manifestPath = outDir + "/manifest.json";
   writeJsonAtomic(manifestPath, manifest);
   std::string out;
-  const std::string cmd = shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
+  const std::string cmd = "exec " + shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
                           shellQuote(outDir + "/runs") + " -j " + std::to_string(jobsInFlight) + " -t " +
                           std::to_string(threadsPerJob) + " 2>&1";
   const int code = runCapture(cmd, out);

@@ -23,7 +23,8 @@ const CLI::Validator& nonEmpty();
 uint64_t parseSeed(const std::string& option, const std::string& text);
 
 /// Run `cmd` through /bin/sh and capture its stdout; returns the exit status (-1 when it did
-/// not exit normally). Throws Error when it cannot be started.
+/// not exit normally). The child gets SIGTERM if the calling thread dies first (a command
+/// starting with "exec" passes that on to its program). Throws Error when it cannot be started.
 int runCapture(const std::string& cmd, std::string& out);
 
 /// Path of the running voxcone executable.

@@ -46,7 +46,7 @@ void runStudyMemory(const StudyOptions& o) {
 
   nlohmann::json rows = nlohmann::json::array();
   for (int level = first; level <= last; ++level) {
-    const std::string cmd = shellQuote(selfExe()) + " voxelize " + shellQuote(o.scenePath) + " --json -q --level " +
+    const std::string cmd = "exec " + shellQuote(selfExe()) + " voxelize " + shellQuote(o.scenePath) + " --json -q --level " +
                             std::to_string(level) + " --photons " + std::to_string(o.photons) + " -t " +
                             std::to_string(o.threads) + " 2>&1";
     std::fprintf(stderr, "study memory: level %d ...\n", level);

@@ -12,10 +12,14 @@
 #include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
 
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <vector>
 
 namespace voxcone {
 namespace {
@@ -51,6 +55,53 @@ protected:
   }
   std::string m_out;
 };
+
+/// Pids of processes whose command line contains `needle`.
+std::vector<pid_t> processesWith(const std::string& needle) {
+  std::vector<pid_t> out;
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string name = e.path().filename().string();
+    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream f(e.path() / "cmdline");
+    std::string cmdline((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    if (cmdline.find(needle) != std::string::npos) out.push_back(pid_t(std::stol(name)));
+  }
+  return out;
+}
+
+TEST_F(Batch, ARenderDiesWithItsBatch) {
+  // A batch killed with SIGKILL (no chance to clean up) used to leave its render running and
+  // writing into the output folder; the render now gets SIGTERM with its parent's death.
+  const std::string tag = "pdeath-" + std::to_string(::getpid());
+  const std::string manifest = writeManifest(
+      {{"defaults", {{"scene", test::sourceDir() + "/data/scenes/cornell-box.json"}, {"res", "64x64"}}},
+       {"jobs", {{{"name", tag}, {"method", "path"}, {"spp", 1 << 20}}}}});
+  const pid_t batch = ::fork();
+  ASSERT_GE(batch, 0);
+  if (batch == 0) {
+    const std::string out = path("runs");
+    ::execl(VOXCONE_CLI_PATH, VOXCONE_CLI_PATH, "batch", manifest.c_str(), "-q", "-o", out.c_str(), "-j", "1", "-t", "1",
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  // Wait (up to 60 s on a slow machine) for the render to start, then kill the batch.
+  std::vector<pid_t> renders;
+  for (int i = 0; i < 600 && renders.empty(); ++i) {
+    ::usleep(100000);
+    for (pid_t p : processesWith(tag))
+      if (p != batch) renders.push_back(p);
+  }
+  ASSERT_FALSE(renders.empty()) << "the render never started";
+  ::kill(batch, SIGKILL);
+  ::waitpid(batch, nullptr, 0);
+  bool gone = false;
+  for (int i = 0; i < 600 && !gone; ++i) {
+    ::usleep(100000);
+    gone = true;
+    for (pid_t p : renders) gone = gone && (::kill(p, 0) != 0 || processesWith(tag).empty());
+  }
+  EXPECT_TRUE(gone) << "the render outlived its batch";
+}
 
 TEST_F(Batch, GridExpandsIntoNamedJobsAndParallelEqualsSerial) {
   const std::string manifest = writeManifest(gridManifest());
