@@ -236,6 +236,23 @@ std::string lastLine(const std::string& s) {
 }
 
 /// Run `job` as a child `voxcone render` writing outDir/<name>.{exr,png,json}.
+/// Whether job `name` left a complete set in `outDir` (what --skip-existing may keep): its
+/// sidecar parses, and its EXR opens with the size the sidecar records. The sidecar alone
+/// trusted an EXR deleted or truncated since.
+bool completeOutputs(const fs::path& outDir, const std::string& name) {
+  try {
+    const fs::path sidecar = outDir / (name + ".json");
+    if (!fs::exists(sidecar)) return false;
+    std::ifstream f(sidecar);
+    const nlohmann::json meta = nlohmann::json::parse(f);
+    const Image image = readImage((outDir / (name + ".exr")).string());
+    return image.width == meta.at("settings").at("width").get<int>() &&
+           image.height == meta.at("settings").at("height").get<int>();
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 JobResult runJob(const Job& job, const fs::path& outDir, const BatchOptions& o) {
   const nlohmann::json& s = job.spec;
   std::string cmd;
@@ -413,7 +430,7 @@ void runBatch(const BatchOptions& o) {
               r.error = "interrupted";
               continue;
             }
-            if (o.skipExisting && fs::exists(sidecar)) r.status = "existing";
+            if (o.skipExisting && completeOutputs(outDir, job.name)) r.status = "existing";
             else r = runJob(job, outDir, o);
             if (r.status != "failed") {
               try {

@@ -194,6 +194,14 @@ TEST_F(Batch, SkipExistingAndShards) {
   fs::remove(path("out/path-ref.json"));
   ASSERT_EQ(run("batch " + manifest + " --skip-existing -t 1 -q -o " + path("out")), 0);
   EXPECT_EQ(readJson(path("out/results.json"))["rows"][0]["status"], "ok");
+  // The sidecar is not enough: a job whose EXR was deleted or truncated runs again.
+  const nlohmann::json rows = readJson(path("out/results.json"))["rows"];
+  const std::string deleted = rows[1]["name"], truncated = rows[2]["name"];
+  fs::remove(path("out/" + deleted + ".exr"));
+  fs::resize_file(path("out/" + truncated + ".exr"), 100);
+  ASSERT_EQ(run("batch " + manifest + " --skip-existing -t 1 -q -o " + path("out")), 0);
+  for (const nlohmann::json& r : readJson(path("out/results.json"))["rows"])
+    EXPECT_EQ(r["status"], r["name"] == deleted || r["name"] == truncated ? "ok" : "existing") << r["name"];
   EXPECT_NE(run("batch " + manifest + " --shard 2/2"), 0);
 }
 
