@@ -133,6 +133,11 @@ void validateSpec(const nlohmann::json& spec, const std::string& where) {
       throw SettingsError(where + "." + k + ": expected a positive number");
   if (spec.contains("method") && !spec["method"].is_string()) throw SettingsError(where + ".method: expected a string");
   if (spec.contains("res") && !spec["res"].is_string()) throw SettingsError(where + ".res: expected WIDTHxHEIGHT");
+  // Before any job runs: every job's metrics would fail (they were recorded as "ok" with
+  // empty metric columns).
+  std::error_code ec;
+  if (spec.contains("reference") && !fs::is_regular_file(spec["reference"].get<std::string>(), ec))
+    throw SettingsError(where + ".reference: no such image file: " + spec["reference"].get<std::string>());
 }
 
 /// The manifest's jobs, in order: "jobs" first, then each "grid" entry expanded (every array
@@ -437,6 +442,12 @@ void runBatch(const BatchOptions& o) {
                 std::ifstream f(sidecar);
                 r.sidecar = nlohmann::json::parse(f);
                 r.metrics = jobMetrics(job, outDir, refs, refsMutex);
+                // A job whose metrics cannot be computed (its image and the reference differ
+                // in size or kind, the reference is unreadable) has failed, not passed.
+                if (r.metrics.is_object() && r.metrics.contains("error")) {
+                  r.status = "failed";
+                  r.error = "metrics: " + r.metrics["error"].get<std::string>();
+                }
               } catch (const std::exception& e) {
                 r.status = "failed";
                 r.error = "cannot read " + sidecar.string() + ": " + e.what();

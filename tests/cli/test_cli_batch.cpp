@@ -217,6 +217,14 @@ TEST_F(Batch, MetricsAgainstTheReferenceMatchCompare) {
     EXPECT_NEAR(r["metrics"]["relmse"].get<double>(), m.relMse, 1e-12 * (1.0 + m.relMse));
     EXPECT_NEAR(r["metrics"]["psnr_srgb8"].get<double>(), m.psnrSrgb8, 1e-9);
   }
+  // Metrics that cannot be computed (the reference is 12x12, the job 8x8) fail the job.
+  nlohmann::json wrongSize = gridManifest(ref);
+  wrongSize["defaults"]["res"] = "8x8";
+  EXPECT_EQ(run("batch " + writeManifest(wrongSize, "wrong.json") + " -t 1 -q -o " + path("wrong")), 1);
+  for (const nlohmann::json& r : readJson(path("wrong/results.json"))["rows"]) {
+    EXPECT_EQ(r["status"], "failed") << r["name"];
+    EXPECT_NE(r["error"].get<std::string>().find("size mismatch"), std::string::npos) << r["error"];
+  }
 }
 
 TEST_F(Batch, MemoryBudgetFailsTheJobNotTheBatch) {
@@ -236,7 +244,9 @@ TEST_F(Batch, MemoryBudgetFailsTheJobNotTheBatch) {
 TEST_F(Batch, BadManifestsAreOneLineErrors) {
   for (const std::string bad : {R"({"jobs": [{"scene": "a.json", "sp": 4}]})", R"({"grid": {"spp": []}})",
                                 R"({"jobs": [{"spp": 4}]})", R"({"jobs": [{"name": "x/y", "scene": "a.json"}]})",
-                                R"({"jobs": [{"scene": "a.json"}, {"scene": "a.json"}]})", R"({"jobz": []})", "not json"}) {
+                                R"({"jobs": [{"scene": "a.json"}, {"scene": "a.json"}]})", R"({"jobz": []})", "not json",
+                                // A reference that is not there: refused before any job runs.
+                                R"({"reference": "missing.exr", "jobs": [{"scene": "a.json"}]})"}) {
     std::ofstream(path("bad.json")) << bad;
     EXPECT_EQ(run("batch " + path("bad.json") + " --dry-run"), 2) << bad;
   }
