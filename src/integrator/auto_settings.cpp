@@ -142,14 +142,17 @@ ProgressiveResult renderVoxconeToTarget(const Scene& scene, const Accel& accel, 
     cs.method = "path";
     cs.spp = req.controlSpp;
     cs.seed = mixBits(pass.seed ^ 0x7061746863746c31ull);
-    // Independent samples: the spread of stratified ones overstates their mean's variance
-    // (with Sobol the bias estimate came out -0.006 +- 0.001 on cornell-box).
-    cs.sampler = SamplerKind::Independent;
+    // The render's own (stratified) sampler, one estimate per pass: the passes' estimates are
+    // independent (randomized quasi-Monte Carlo), so their spread gives the variance of their
+    // mean. (The spread of the stratified samples within a pass overstates it: the bias estimate
+    // came out -0.006 +- 0.001 on cornell-box; independent samples were unbiased but noisier.)
     const std::vector<PixelSamples> c = renderPixels(scene, *path, cs, control);
     for (size_t i = 0; i < control.size(); ++i) {
-      controlSamples[i].sum += c[i].sum;
-      controlSamples[i].sumSquares += c[i].sumSquares;
-      controlSamples[i].count += c[i].count;
+      if (c[i].count == 0) continue;
+      const DVec3 mean = c[i].sum / double(c[i].count);
+      controlSamples[i].sum += mean;
+      controlSamples[i].sumSquares += mean * mean;
+      ++controlSamples[i].count;
     }
     }
     r.controlSeconds += t.seconds();
@@ -178,7 +181,7 @@ ProgressiveResult renderVoxconeToTarget(const Scene& scene, const Accel& accel, 
       for (int ch = 0; ch < 3; ++ch) {
         const double m = sum[control[i]][ch] / K;
         const double pm = cp.sum[ch] / cp.count;
-        const double varP = std::max(0.0, (cp.sumSquares[ch] - cp.count * pm * pm) / (cp.count - 1.0)) / cp.count;
+        const double varP = std::max(0.0, (cp.sumSquares[ch] - cp.count * pm * pm) / (cp.count - 1.0)) / cp.count;  // of the mean of the passes' estimates
         const double varM = passVariance[control[i] * 3 + size_t(ch)] / K;
         term += ((m - pm) * (m - pm) - varM - varP) / (m * m + kRelMseEpsilon);
       }

@@ -13,10 +13,11 @@
 ///  - noise: one pass's relMSE against its own expectation, from the passes' spread: per pixel
 ///    and channel sum_k (I_k - M)^2 / (K - 1), over (M^2 + eps), averaged (eps as relMSE's);
 ///  - bias2: voxcone's mean squared bias against the true image. Control pixels (one in each 8x8
-///    block, chosen per block from the seed) are path traced, `controlSpp` samples per pass with
-///    a new seed each pass, unbiased; per control pixel (M - P)^2 - var(M) - var(P) over
-///    (M^2 + eps), with var(P) from the path samples' spread, var(M) from the passes', is an
-///    unbiased estimate of its squared relative bias, and their mean estimates bias2. Passes
+///    block, chosen per block from the seed) are path traced, `controlSpp` stratified samples
+///    per pass with a new seed each pass: one unbiased, independent estimate per pass
+///    (randomized quasi-Monte Carlo). Per control pixel (M - P)^2 - var(M) - var(P) over
+///    (M^2 + eps), with var(P) and var(M) from the passes' spread, is an unbiased estimate of its
+///    squared relative bias, and their mean estimates bias2. Passes
 ///    stop adding control samples once bias2's standard error is below 5% of the target (or
 ///    of the prediction, for a budget): the control costs most where the render is short.
 /// After every pass both are re-estimated and the passes needed are recomputed, for the target
@@ -42,7 +43,7 @@ struct ProgressiveRequest {
   double timeBudget = 0.0;    ///< > 0: seconds left for the passes (the caller has spent the rest)
   nlohmann::json options = nlohmann::json::object();  ///< voxcone options, every pass
   int passSpp = 4;            ///< samples per pixel of one pass
-  int controlSpp = 16;        ///< path samples per control pixel per pass
+  int controlSpp = 14;        ///< path samples per control pixel per pass
   int maxPasses = 1024;
 };
 
