@@ -32,21 +32,24 @@ namespace voxcone {
 
 namespace {
 
+/// The box whose corners are the xyz lanes of lo and hi.
+Bounds3 toBounds(__m128 lo, __m128 hi) {
+  alignas(16) float l[4], h[4];
+  _mm_store_ps(l, lo);
+  _mm_store_ps(h, hi);
+  Bounds3 b;
+  b.lo = Vec3(l[0], l[1], l[2]);
+  b.hi = Vec3(h[0], h[1], h[2]);
+  return b;
+}
+
 /// A triangle's bounds during the build, as two SSE vectors (32 bytes; the id in lo's w lane,
 /// by its bits). lo + hi is twice the centroid: binning works on it directly.
 struct alignas(16) PrimRef {
   PrimRef() {}  // filled in parallel right after the array is sized: no zeroing first
   __m128 lo, hi;
   uint32_t id() const { return uint32_t(_mm_cvtsi128_si32(_mm_castps_si128(_mm_shuffle_ps(lo, lo, 0xff)))); }
-  Bounds3 box() const {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, lo);
-    _mm_store_ps(h, hi);
-    Bounds3 b;
-    b.lo = Vec3(l[0], l[1], l[2]);
-    b.hi = Vec3(h[0], h[1], h[2]);
-    return b;
-  }
+  Bounds3 box() const { return toBounds(lo, hi); }
 };
 
 /// An axis-aligned box as two SSE vectors (w lanes unused), empty when lo > hi.
@@ -57,15 +60,7 @@ struct Box4 {
     hi = _mm_max_ps(hi, h);
   }
   void extend(const Box4& b) { extend(b.lo, b.hi); }
-  Bounds3 bounds() const {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, lo);
-    _mm_store_ps(h, hi);
-    Bounds3 b;
-    b.lo = Vec3(l[0], l[1], l[2]);
-    b.hi = Vec3(h[0], h[1], h[2]);
-    return b;
-  }
+  Bounds3 bounds() const { return toBounds(lo, hi); }
   /// Surface area (0 when empty).
   float area() const {
     alignas(16) float d[4];

@@ -45,13 +45,15 @@ std::string quadJson(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d)
   return s.str();
 }
 
-/// A scene of the given shapes, Lambertian albedo 0.6 (exactly 153/255 in 8 bits).
-Scene shapesScene(const std::vector<std::string>& shapes) {
+/// A scene of the given shapes, their material "white" Lambertian albedo 0.6 (exactly 153/255
+/// in 8 bits), or `white` as given.
+Scene shapesScene(const std::vector<std::string>& shapes,
+                  const std::string& white = R"({"type": "lambertian", "albedo": 0.6})") {
   std::string list;
   for (const std::string& s : shapes) list += (list.empty() ? "" : ",") + s;
   const std::string json = R"({
     "camera": {"position": [0.5, 0.5, 3], "target": [0.5, 0.5, 0], "up": [0, 1, 0], "fov_y_deg": 40},
-    "materials": {"white": {"type": "lambertian", "albedo": 0.6}},
+    "materials": {"white": )" + white + R"(},
     "shapes": [)" + list + R"(],
     "lights": [{"type": "point", "position": [0.5, 0.5, 2], "intensity": 1}]
   })";
@@ -466,15 +468,8 @@ TEST(VoxelField, RejectsBadSettings) {
   }
   // Smooth glass is left out of the field: a scene of glass alone has nothing to voxelize.
   s.padding = kDefaultFieldPadding;
-  std::string glass = planeAt(0.0f);
-  glass.replace(glass.find("\"white\""), 7, "\"glass\"");
-  const std::string json = R"({
-    "camera": {"position": [0.5, 0.5, 3], "target": [0.5, 0.5, 0], "up": [0, 1, 0], "fov_y_deg": 40},
-    "materials": {"glass": {"type": "dielectric", "ior": 1.5}},
-    "shapes": [)" + glass + R"(],
-    "lights": [{"type": "point", "position": [0.5, 0.5, 2], "intensity": 1}]
-  })";
-  EXPECT_THROW(VoxelField::voxelize(parseScene(json, "glass-only", "."), s), SettingsError);
+  EXPECT_THROW(VoxelField::voxelize(shapesScene({planeAt(0.0f)}, R"({"type": "dielectric", "ior": 1.5})"), s),
+               SettingsError);
 }
 
 TEST(VoxelField, CausticGrid) {
