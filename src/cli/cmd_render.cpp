@@ -213,7 +213,16 @@ void runRender(const RenderOptions& o) {
   meta["timings"]["total_seconds"] = total.seconds();
   meta["peak_rss_bytes"] = peakRssBytes();
   meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};
-  writeJsonAtomic(jsonPath, meta);
+  try {
+    writeJsonAtomic(jsonPath, meta);
+  } catch (...) {
+    // The sidecar, written last, is what marks a set complete (batch --skip-existing): without
+    // it the images go too, so no half set stays behind.
+    std::error_code ec;
+    std::filesystem::remove(exrPath, ec);
+    std::filesystem::remove(pngPath, ec);
+    throw;
+  }
   std::printf("wrote %s (%s, %s)\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str());
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
               settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());

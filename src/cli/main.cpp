@@ -5,7 +5,38 @@
 #include "voxcone/core/progress.h"
 
 #include <cstdio>
+#include <string>
 #include <exception>
+
+namespace {
+
+/// One printable line: control characters and bytes that are not valid UTF-8 (a binary file's
+/// bytes echoed by a parser) become '?', line breaks and tabs spaces; UTF-8 (file names) stays.
+std::string printable(const char* what) {
+  std::string out;
+  const auto* p = reinterpret_cast<const unsigned char*>(what);
+  while (*p) {
+    const unsigned char c = *p;
+    if (c < 0x80) {
+      out += c == '\n' || c == '\r' || c == '\t' ? ' ' : c < 32 || c == 127 ? '?' : char(c);
+      ++p;
+      continue;
+    }
+    const int len = (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xe ? 3 : (c >> 3) == 0x1e ? 4 : 0;
+    bool ok = len > 0;
+    for (int k = 1; ok && k < len; ++k) ok = (p[k] & 0xc0) == 0x80;
+    if (ok) {
+      out.append(reinterpret_cast<const char*>(p), size_t(len));
+      p += len;
+    } else {
+      out += '?';
+      ++p;
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"voxcone: physically based rendering with exact hits and voxel cone gathering"};
@@ -24,19 +55,19 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const voxcone::NotMetError& e) {
-    std::fprintf(stderr, "voxcone: not met: %s\n", e.what());
+    std::fprintf(stderr, "voxcone: not met: %s\n", printable(e.what()).c_str());
     return 3;
   } catch (const voxcone::CancelledError&) {
     std::fprintf(stderr, "voxcone: interrupted; no output written\n");
     return 130;
   } catch (const voxcone::Error& e) {
-    std::fprintf(stderr, "voxcone: error: %s\n", e.what());
+    std::fprintf(stderr, "voxcone: error: %s\n", printable(e.what()).c_str());
     return 2;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "voxcone: error: out of memory\n");
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "voxcone: error: %s\n", e.what());
+    std::fprintf(stderr, "voxcone: error: %s\n", printable(e.what()).c_str());
     return 2;
   }
   return 0;

@@ -80,6 +80,7 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   const std::string scenes = test::sourceDir() + "/data/scenes/";
   {
     std::ofstream(d / "broken.json") << "{\"camera\": ";
+    std::ofstream(d / "binary.json") << std::string("\xff\xfe\x01\x02{", 5);
     std::ofstream(d / "badmesh.json") << R"({"camera": {"position": [0,0,-1], "target": [0,0,0]},
       "materials": {"m": {"type": "lambertian", "emission": 1}},
       "shapes": [{"type": "mesh", "file": "missing.obj", "material": "m"}]})";
@@ -87,6 +88,7 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   const std::vector<std::string> bad = {
       "render /nonexistent.json -q -o " + (d / "a").string(),
       "render " + (d / "broken.json").string() + " -q -o " + (d / "b").string(),
+      "render " + (d / "binary.json").string() + " -q -o " + (d / "b2").string(),
       "render " + (d / "badmesh.json").string() + " -q -o " + (d / "c").string(),
       "render " + scenes + "cornell-box.json -q --method nope -o " + (d / "d").string(),
       "render " + scenes + "cornell-box.json -q --res 0x10 -o " + (d / "e").string(),
@@ -107,11 +109,14 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
     EXPECT_NE(r.code, 0) << args;
     EXPECT_NE(r.code, -1) << args << " crashed";
     EXPECT_FALSE(r.err.empty()) << args;
-    // One line of error (CLI11 usage errors may add a hint line).
+    // One line of error (CLI11 usage errors may add a hint line), printable: no control bytes
+    // and none of a binary file's bytes echoed back.
     EXPECT_LE(std::count(r.err.begin(), r.err.end(), '\n'), 2) << args << ": " << r.err;
+    for (char c : r.err)
+      EXPECT_TRUE(c == '\n' || (c >= 32 && c < 127)) << args << ": byte " << int(static_cast<unsigned char>(c));
   }
-  // Only the two input files remain: no output, no temporaries.
-  EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 2);
+  // Only the three input files remain: no output, no temporaries.
+  EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 3);
 }
 
 TEST(Cli, CompareRefusesAFloatImageAgainstAnEightBitOne) {
