@@ -141,39 +141,53 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
 
   // Voxel range of every triangle: floor of its index-space bounds, so that a surface lying
   // exactly on a voxel face belongs to the voxel above it only (no double-counted area).
+  // Fixed chunks of triangles in parallel, joined in chunk order: the items are in triangle
+  // order at any thread count (voxelizing the dragon at level 5, 2 threads: 95 -> 88 ms).
+  constexpr size_t kItemChunk = 16384;
+  std::vector<std::vector<WorkItem>> chunkItems((triCount + kItemChunk - 1) / kItemChunk);
+  tbb::parallel_for(size_t(0), chunkItems.size(), [&](size_t chunk) {
+    std::vector<WorkItem>& local = chunkItems[chunk];
+    const size_t end = std::min(triCount, (chunk + 1) * kItemChunk);
+    for (size_t t = chunk * kItemChunk; t < end; ++t) {
+      // Smooth glass is not in the field (VoxelField::voxelize): cones see through it.
+      if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
+      const UVec3& tv = scene.triangles[t];
+      const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
+      WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}};
+      int64_t count = 1;
+      for (int a = 0; a < 3; ++a) {
+        const double mn = std::min(p0[a], std::min(p1[a], p2[a])), mx = std::max(p0[a], std::max(p1[a], p2[a]));
+        item.lo[a] = std::clamp(int32_t(std::floor(mn)), 0, maxIndex);
+        item.hi[a] = std::clamp(int32_t(std::floor(mx)), 0, maxIndex);
+        count *= int64_t(item.hi[a] - item.lo[a] + 1);
+      }
+      if (!reachesListed(item.lo, item.hi)) continue;
+      if (count <= kSlabVoxels) {
+        local.push_back(item);
+        continue;
+      }
+      // Cut along the longest range axis into slabs of about kSlabVoxels voxels.
+      int axis = 0;
+      for (int a = 1; a < 3; ++a)
+        if (item.hi[a] - item.lo[a] > item.hi[axis] - item.lo[axis]) axis = a;
+      const int64_t rows = item.hi[axis] - item.lo[axis] + 1;
+      const int64_t perRow = count / rows;
+      const int32_t rowsPerSlab = int32_t(std::max<int64_t>(1, kSlabVoxels / perRow));
+      for (int32_t r = item.lo[axis]; r <= item.hi[axis]; r += rowsPerSlab) {
+        WorkItem slab = item;
+        slab.lo[axis] = r;
+        slab.hi[axis] = std::min(item.hi[axis], r + rowsPerSlab - 1);
+        local.push_back(slab);
+      }
+    }
+  });
+  size_t itemCount = 0;
+  for (const auto& c : chunkItems) itemCount += c.size();
   std::vector<WorkItem> items;
-  items.reserve(triCount + 64);
-  for (size_t t = 0; t < triCount; ++t) {
-    // Smooth glass is not in the field (VoxelField::voxelize): cones see through it.
-    if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
-    const UVec3& tv = scene.triangles[t];
-    const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
-    WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}};
-    int64_t count = 1;
-    for (int a = 0; a < 3; ++a) {
-      const double mn = std::min(p0[a], std::min(p1[a], p2[a])), mx = std::max(p0[a], std::max(p1[a], p2[a]));
-      item.lo[a] = std::clamp(int32_t(std::floor(mn)), 0, maxIndex);
-      item.hi[a] = std::clamp(int32_t(std::floor(mx)), 0, maxIndex);
-      count *= int64_t(item.hi[a] - item.lo[a] + 1);
-    }
-    if (!reachesListed(item.lo, item.hi)) continue;
-    if (count <= kSlabVoxels) {
-      items.push_back(item);
-      continue;
-    }
-    // Cut along the longest range axis into slabs of about kSlabVoxels voxels.
-    int axis = 0;
-    for (int a = 1; a < 3; ++a)
-      if (item.hi[a] - item.lo[a] > item.hi[axis] - item.lo[axis]) axis = a;
-    const int64_t rows = item.hi[axis] - item.lo[axis] + 1;
-    const int64_t perRow = count / rows;
-    const int32_t rowsPerSlab = int32_t(std::max<int64_t>(1, kSlabVoxels / perRow));
-    for (int32_t r = item.lo[axis]; r <= item.hi[axis]; r += rowsPerSlab) {
-      WorkItem slab = item;
-      slab.lo[axis] = r;
-      slab.hi[axis] = std::min(item.hi[axis], r + rowsPerSlab - 1);
-      items.push_back(slab);
-    }
+  items.reserve(itemCount);
+  for (auto& c : chunkItems) {
+    items.insert(items.end(), c.begin(), c.end());
+    std::vector<WorkItem>().swap(c);
   }
 
   if (progress) progress->start("voxelize", items.size());
