@@ -381,12 +381,15 @@ struct Hbvh::Flattener {
   struct Collapsed {
     const BuildNode* kids[4] = {nullptr, nullptr, nullptr, nullptr};
     int k = 0;
+    Sphere sphere[4];               ///< the kids' bounding spheres, where sphereMask has them
+    uint32_t sphereMask = 0;
     uint32_t nodes = 0, packets = 0, spheres = 0, leaves = 0;
     int depth = 0;  ///< levels of Node4s below and including this one
     std::unique_ptr<Collapsed> sub[4];  ///< for inner kids
   };
-  /// Subtrees with more triangles than this are measured and filled as parallel tasks.
-  static constexpr uint32_t kParallelFill = 4096;
+  /// Subtrees of more triangles than the build's parallel threshold are measured and filled
+  /// as parallel tasks.
+  uint32_t parallelFill() const { return uint32_t(bvh.m_settings.parallelThreshold); }
 
   /// SAH cost of the binary subtree, relative to the root's area; counts binary nodes.
   double sah(const BuildNode& n, float rootArea, uint64_t& binaryNodes) const {
@@ -422,7 +425,7 @@ struct Hbvh::Flattener {
       }
     }
     auto sub = [&](int i) { c->sub[i] = measure(*c->kids[i]); };
-    if (n.count > kParallelFill) {
+    if (n.count > parallelFill()) {
       tbb::parallel_for(0, c->k, [&](int i) {
         if (!c->kids[i]->leaf()) sub(i);
       });
@@ -432,8 +435,10 @@ struct Hbvh::Flattener {
     }
     c->nodes = 1;
     for (int i = 0; i < c->k; ++i) {
-      Sphere unused;
-      c->spheres += fitSphere(*c->kids[i], unused) ? 1u : 0u;
+      if (fitSphere(*c->kids[i], c->sphere[i])) {
+        c->sphereMask |= 1u << i;
+        ++c->spheres;
+      }
       if (c->kids[i]->leaf()) {
         c->packets += (c->kids[i]->count + 3u) / 4u;
         ++c->leaves;
@@ -461,7 +466,7 @@ struct Hbvh::Flattener {
         out.hi[a][i] = -kInf;
       }
     out.sphereBase = sphere;
-    out.sphereMask = 0;
+    out.sphereMask = c.sphereMask;
     for (int i = 0; i < 4; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
     for (int i = 0; i < c.k; ++i) {
       const BuildNode& kid = *c.kids[i];
@@ -469,11 +474,7 @@ struct Hbvh::Flattener {
         out.lo[a][i] = kid.box.lo[a];
         out.hi[a][i] = kid.box.hi[a];
       }
-      Sphere s;
-      if (fitSphere(kid, s)) {
-        bvh.m_spheres[sphere++] = Vec4(s.center, s.radius);
-        out.sphereMask |= 1u << i;
-      }
+      if (c.sphereMask & (1u << i)) bvh.m_spheres[sphere++] = Vec4(c.sphere[i].center, c.sphere[i].radius);
     }
     // Where each kid's part starts.
     uint32_t nextNode = node + 1;
@@ -505,7 +506,7 @@ struct Hbvh::Flattener {
         fill(*c.sub[i], starts[i][0], starts[i][1], starts[i][2], c.kids[i]->count);
       }
     };
-    if (triangles > kParallelFill) tbb::parallel_for(0, c.k, kid);
+    if (triangles > parallelFill()) tbb::parallel_for(0, c.k, kid);
     else
       for (int i = 0; i < c.k; ++i) kid(i);
   }

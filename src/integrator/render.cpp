@@ -287,4 +287,27 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   return result;
 }
 
+std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                                       const std::vector<size_t>& pixels) {
+  std::vector<PixelSamples> out(pixels.size());
+  const int w = settings.width, h = settings.height;
+  tbb::parallel_for(size_t(0), pixels.size(), [&](size_t i) {
+    const size_t pixel = pixels[i];
+    const int x = int(pixel % size_t(w)), y = int(pixel / size_t(w));
+    Sampler sampler(settings.sampler, settings.seed, pixel, uint32_t(settings.spp));
+    PixelSamples& p = out[i];
+    for (int s = 0; s < settings.spp; ++s) {
+      sampler.startSample(uint32_t(s));
+      const Vec2 jitter = sampler.uniform2();
+      const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
+      const Vec3 L = integrator.li(ray, sampler);
+      if (!usableRadiance(L)) continue;
+      p.sum += DVec3(L);
+      p.sumSquares += DVec3(L) * DVec3(L);
+      ++p.count;
+    }
+  });
+  return out;
+}
+
 }  // namespace voxcone

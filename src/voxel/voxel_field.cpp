@@ -325,6 +325,8 @@ struct ChildShare {
   bool operator<(const ChildShare& o) const { return parent != o.parent ? parent < o.parent : child < o.child; }
 };
 
+/// Every (parent, child, weight) share of `child`'s voxels, sorted by (parent key, child index),
+/// which is unique: one order at any thread count.
 std::vector<ChildShare> childShares(const Level& child, MipFilter filter) {
   std::vector<ChildShare> shares;
   const uint32_t parentRes = std::max(1u, child.resolution >> 1);
@@ -333,6 +335,7 @@ std::vector<ChildShare> childShares(const Level& child, MipFilter filter) {
     child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
       shares.push_back({voxel::packKey(i >> 1, j >> 1, k >> 1), uint32_t(v), 0.125f});
     });
+    tbb::parallel_sort(shares.begin(), shares.end());
     return shares;
   }
   shares.reserve(child.size() * 8);
@@ -372,9 +375,7 @@ std::vector<ChildShare> childShares(const Level& child, MipFilter filter) {
 
 /// One coarser level from `child` (VoxelField::buildMips).
 VoxelArrays restrictLevel(const Level& child, MipFilter filter) {
-  std::vector<ChildShare> shares = childShares(child, filter);
-  // (parent key, child index) is unique: one order at any thread count.
-  if (filter == MipFilter::Box) tbb::parallel_sort(shares.begin(), shares.end());
+  const std::vector<ChildShare> shares = childShares(child, filter);
   VoxelArrays out;
   const bool lit = !child.radiance.empty();
   for (size_t a = 0; a < shares.size();) {
@@ -700,17 +701,10 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
     back[v] = Vec3(k * DVec3(flux.back[v]));
   }
   lv.setRadiance(front, back);
-  // Mips built before are stale: rebuild them from the new finest level.
-  const size_t mips = grid.levels.size();
+  // Mips built before are stale: dropped, buildMips makes them anew (rebuilding them here too
+  // built every mip twice per pass of a progressive render).
   grid.levels.resize(1);
   grid.injectSeconds = timer.seconds();
-  for (size_t m = 1; m < mips; ++m) {
-    Timer t;
-    const Level& child = grid.levels.back();
-    VoxelArrays a = restrictLevel(child, settings.mipFilter);
-    grid.levels.push_back(makeLevel(child.level - 1, child.voxelSize * 2.0, a));
-    grid.levels.back().buildSeconds = t.seconds();
-  }
 }
 
 VoxelField::VoxelField() : m_impl(std::make_unique<Impl>()) {}

@@ -70,15 +70,4 @@ struct ProgressiveResult {
 ProgressiveResult renderVoxconeToTarget(const Scene& scene, const Accel& accel, const RenderSettings& settings,
                                         const ProgressiveRequest& request, Progress* progress = nullptr);
 
-/// Samples of `integrator`'s li at `pixels` (indices y * width + x): `settings.spp` each, drawn
-/// as renderImage draws them (the same sampler, seed and jitter), no indirect filter; their sum
-/// and sum of squares per channel (non-finite samples dropped and not counted). Parallel,
-/// deterministic.
-struct PixelSamples {
-  DVec3 sum{0.0}, sumSquares{0.0};
-  uint32_t count = 0;
-};
-std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                                       const std::vector<size_t>& pixels);
-
 }  // namespace voxcone

@@ -131,4 +131,15 @@ struct RenderResult {
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                          Progress* progress = nullptr);
 
+/// Samples of `integrator`'s li at `pixels` (indices y * width + x): `settings.spp` each, drawn
+/// as renderImage draws them (the same sampler, seed and jitter), no indirect filter; their sum
+/// and sum of squares per channel (samples renderImage would drop, non-finite or negative, not counted). Parallel,
+/// deterministic.
+struct PixelSamples {
+  DVec3 sum{0.0}, sumSquares{0.0};
+  uint32_t count = 0;
+};
+std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                                       const std::vector<size_t>& pixels);
+
 }  // namespace voxcone

@@ -137,7 +137,7 @@ public:
   /// open panel lit from behind its winding). Weights exp(-d^2 / 2 sigma^2) times the voxel's
   /// surface area, normalized to one. Without such a voxel the photon goes to the voxel
   /// containing it, on the side it arrived on, else it is dropped (droppedPower()). Replaces
-  /// earlier injections; rebuilds mips already built.
+  /// earlier injections and drops the mips built from them: call buildMips again.
   void inject(const PhotonMaps& photons, Progress* progress = nullptr);
 
   /// Build levels level-1 ... coarsestLevel by restriction (settings.mipFilter: the 2x2x2

@@ -46,7 +46,6 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
   AxisHit out;
   out.t = hit->t;
   const SurfaceHit sh = m_scene.surfaceAt(hit->triangle, hit->b1, hit->b2);
-  out.position = sh.position;
   out.side = glm::dot(sh.geomNormal, d) < 0.0f ? sh.geomNormal : -sh.geomNormal;
   out.surface = sh;
   return out;
@@ -92,7 +91,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     if (!hit) return Vec3(0.0f);
     if (m_scene.materials[hit->surface.material].isDelta()) return continueSpecular(hit->surface, d, tanHalf, depth);
     const float v = std::clamp(lookupSize(hit->t), m_v0, vMax);
-    return m_field.coneSample(hit->position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
+    return m_field.coneSample(hit->surface.position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
         .radiance;
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
@@ -104,7 +103,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
       if (m_scene.materials[hit->surface.material].isDelta())
         hitRadiance = continueSpecular(hit->surface, d, tanHalf, depth);
       else
-        hitRadiance = m_field.coneSample(hit->position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
+        hitRadiance = m_field.coneSample(hit->surface.position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);

@@ -32,7 +32,9 @@ constexpr float kClearance = 2.5980762f;
 /// surface's finest voxels (within sqrt(3)/2 v0 of it). (kClearance here cost the dragon 0.16 dB.)
 constexpr float kApexLift = 1.0f + 0.8660254f;
 /// Mirror and glass hits a cone continues through (reflected and refracted cones), and the
-/// smallest lobe weight followed.
+/// smallest lobe weight followed. Measured on the glass dragon at 4 spp: depth 2 / 3 / 4 gave
+/// 31.71 / 31.84 / 31.92 dB (a cone entering glass needs the exit and an internal reflection
+/// or two); a cut of 1e-3 (the delta chains', delta_chain.h) gave the same image to the bit.
 constexpr int kMaxSpecularDepth = 4;
 constexpr float kSpecularCut = 1e-2f;
 /// A cone stops when 99% of it is covered: the rest can add at most 1% of its radiance.
@@ -58,12 +60,12 @@ public:
   int finestLevel() const { return m_finest; }
 
 private:
-  /// The exact hit of the ray from p (normal n) along d within tMax: distance, position, and
-  /// the hit surface's normal turned towards the ray's side.
+  /// The exact hit of the ray from p (normal n) along d within tMax: distance, the surface,
+  /// and its geometric normal turned towards the ray's side.
   struct AxisHit {
     float t = 0.0f;
-    Vec3 position{0.0f}, side{0.0f};
     SurfaceHit surface;
+    Vec3 side{0.0f};
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
   Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const;
