@@ -41,12 +41,16 @@ void runVoxelize(const VoxelizeOptions& o) {
   if (o.causticLevel > 0 && (o.causticLevel < o.level || o.causticLevel > 13))
     throw SettingsError("--caustic-level must be 0 or in [level, 13]");
 
+  // The peak resident set after each stage (the process's high-water mark so far).
+  nlohmann::json peakAfter;
   Timer t;
   const Scene scene = loadScene(o.scenePath);
   const double loadSec = t.seconds();
+  peakAfter["load"] = peakRssBytes();
   t.reset();
   const Hbvh accel(scene, HbvhBuildSettings{}, &progress);
   const double buildSec = t.seconds();
+  peakAfter["hbvh"] = peakRssBytes();
 
   // Model no more than the scene needs: a caustic grid only where a specular surface can focus
   // light (L S+ D paths need a delta material). By default one level finer than the field, at
@@ -65,6 +69,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   ps.causticPhotons = causticLevel > 0 ? (o.causticPhotons >= 0 ? uint64_t(o.causticPhotons) : causticPhotons) : 0;
   ps.seed = o.seed;
   const PhotonMaps maps = tracePhotons(scene, accel, ps, &progress);
+  peakAfter["photons"] = peakRssBytes();
 
   VoxelSettings vs;
   vs.level = o.level;
@@ -73,12 +78,15 @@ void runVoxelize(const VoxelizeOptions& o) {
   t.reset();
   VoxelField field = VoxelField::voxelize(scene, vs, &progress);
   const double voxelizeSec = t.seconds();
+  peakAfter["voxelize"] = peakRssBytes();
   t.reset();
   field.inject(maps, &progress);
   const double injectSec = t.seconds();
+  peakAfter["inject"] = peakRssBytes();
   t.reset();
   field.buildMips(&progress);
   const double mipSec = t.seconds();
+  peakAfter["mips"] = peakRssBytes();
 
   nlohmann::json j;
   j["scene"] = o.scenePath;
@@ -101,10 +109,12 @@ void runVoxelize(const VoxelizeOptions& o) {
     t.reset();
     field.write(o.output, j);
     j["timings"]["write_seconds"] = t.seconds();
+    peakAfter["write"] = peakRssBytes();
     j["output"] = o.output;
   }
   j["timings"]["total_seconds"] = total.seconds();
   j["peak_rss_bytes"] = peakRssBytes();
+  j["peak_rss_bytes_after"] = peakAfter;
 
   if (o.json) {
     std::printf("%s\n", j.dump(2).c_str());

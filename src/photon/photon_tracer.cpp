@@ -78,6 +78,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
         Photon ph;
         ph.position = pos;
         ph.power = power;
+        ph.albedo = diffuseReflectance(mat);
         ph.incident = woWorld;
         ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
         ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));

@@ -1,18 +1,22 @@
 /// \file voxel_field.cpp
 /// The sparse voxel field: per level, one OpenVDB topology tree whose active values index a
-/// brick table, and per-voxel attributes stored compactly as structure-of-arrays. This is the
-/// only translation unit of the library that includes OpenVDB (its headers are slow to compile).
+/// table of superbricks, and per-voxel attributes stored compactly as structure-of-arrays. This
+/// is the only translation unit of the library that includes OpenVDB (its headers are slow to
+/// compile).
 ///
 /// Layout of one level (why not OpenVDB value grids or a uint32 index per voxel in 4^3 leaves):
 /// a flat wall leaves most of a dense leaf empty, so a dense index leaf costs ~19 bytes per active
 /// voxel on the Cornell walls, more than all the attributes together. Instead voxels are grouped
-/// in 4^3 bricks: the OpenVDB tree (Tree4<uint32_t, 4, 3, 2>, i.e. 4^3 leaves of bricks = 16^3
-/// voxels; internal nodes of 8^3 and 16^3 children, whose tables cost 4 and 32 KB where the
-/// default 16^3/32^3 cost 32 and 256 KB, which dominated the small coarse levels) maps a brick
-/// coordinate to a brick index; the brick holds a 64-bit occupancy mask and
-/// the index of its first voxel, and voxel (i, j, k) is
-///   brickBase[b] + popcount(brickMask[b] & ((1 << bit) - 1)),  bit = (i&3)<<4 | (j&3)<<2 | (k&3)
-/// (the NanoVDB "index grid" idea). That is ~2 bytes of topology per voxel on a wall.
+/// in 4^3 bricks and bricks in 4^3 superbricks (16^3 voxels): the OpenVDB tree (Tree4<uint32_t,
+/// 4, 3, 2>, leaves of 4^3 superbricks = 64^3 voxels) maps a superbrick coordinate to its index;
+/// a superbrick holds a 64-bit mask of its bricks and the index of its first brick, a brick a
+/// 64-bit mask of its voxels and the index of its first voxel, and voxel (i, j, k) is
+///   brick = superBase[s] + popcount(superMask[s] & ((1 << bit(i>>2, j>>2, k>>2)) - 1))
+///   voxel = brickBase[b] + popcount(brickMask[b] & ((1 << bit(i, j, k)) - 1)),
+///   bit(i, j, k) = (i&3)<<4 | (j&3)<<2 | (k&3)
+/// (the NanoVDB "index grid" idea, twice). Levels up to 8 keep a flat brick table instead of
+/// the tree probe. Topology: 12 bytes per brick plus the superbricks, 0.9 bytes per voxel on
+/// the dragon at level 10 (the tree of 4^3 brick leaves took 2.2).
 ///
 /// Attributes per voxel (compact encodings, decoded by the accessors below):
 ///   coverage  half    finest level: surface area in the voxel / voxelSize^2 (may exceed 1);
@@ -20,15 +24,16 @@
 ///   normal    uint16  octahedral unit vector, 2 x 8 bit (Cigolle et al. 2014, "A Survey of
 ///                     Efficient Representations for Independent Unit Vectors"; < 1 degree
 ///                     error), stored renormalized (the opacity-weighted sum's length is not kept)
-///   albedo    3 x uint8 linear [0, 1]
-///   radiance  2 x uint32 front and back side, RGB9E5 shared exponent (EXT_texture_shared_exponent):
-///                     9-bit mantissas, relative error <= 2^-10 on the largest channel, range
-///                     [0, 65408] W/(sr m^2)
 ///   axes      3 x uint8 mips only: opacity-weighted mean |normal| per axis
-/// 15 bytes per voxel at the finest level (15 in the mips: axes instead of albedo) plus ~2
-/// bytes of topology. With one radiance per voxel (sides mixed) cornell-dragon level 10 (5.9 M
-/// voxels, 7.9 M with the mips) took 92.8 MiB; 2x16-bit normals and 3 x half radiance (15
-/// bytes) took 135 MB; albedo in every mip and 32^3 root children 101.3 MiB.
+/// and per brick, only for the bricks that need them (SparseBricks: 4 bytes per brick each):
+///   radiance  uint32  front and back side, RGB9E5 shared exponent (EXT_texture_shared_exponent):
+///                     9-bit mantissas, relative error <= 2^-10 on the largest channel, range
+///                     [0, 65408] W/(sr m^2); bricks where some voxel's side is lit
+///   diffuse   uint8   finest level: the diffuse fraction of the surface, bricks not wholly diffuse
+/// No albedo: photons carry the albedo they landed on and inject reflected power.
+/// Cornell-dragon at level 10 (4.7 M voxels, 6.3 M with the mips), 10k photons: 49.1 MB (with
+/// dense two-sided radiance, albedo and 4^3 brick leaves it took 113.4 MB; 1M photons light
+/// every voxel: 69.2 MB).
 
 #include "voxcone/voxel/voxel_field.h"
 
@@ -54,7 +59,9 @@
 #include <algorithm>
 #include <cstring>
 #include <cmath>
+#include <functional>
 #include <mutex>
+#include <optional>
 
 namespace voxcone {
 
@@ -120,6 +127,8 @@ Vec3 decodeRgb9e5(uint32_t code) {
 }
 float decodeUnorm8(uint8_t v) { return float(v) * (1.0f / 255.0f); }
 
+constexpr double kPiD = 3.14159265358979323846;
+
 /// What a cone lookup reads of one voxel, decoded once (Level::coneTable).
 struct ConeVoxel {
   Vec3 projected;  ///< opacity times the axis fractions (|normal| per axis at the finest level)
@@ -128,14 +137,47 @@ struct ConeVoxel {
 };
 static_assert(sizeof(ConeVoxel) == 48, "ConeVoxel is 12 floats");
 
-/// One level of a field: topology plus compact attributes.
+/// Per-brick values stored only for the bricks that need them (most bricks do not: a closed
+/// surface's back side is never lit, most surfaces are wholly diffuse): base[b] is the index of
+/// brick b's first voxel in `values` (its voxels in rank order), or kNone; with no such brick
+/// at all, `base` is empty too.
+template <typename T> struct SparseBricks {
+  static constexpr uint32_t kNone = ~uint32_t(0);
+  std::vector<uint32_t> base;
+  std::vector<T> values;
+  T get(uint32_t brick, uint32_t rank, T fallback) const {
+    if (brick >= base.size() || base[brick] == kNone) return fallback;
+    return values[size_t(base[brick]) + rank];
+  }
+  bool stored(uint32_t brick) const { return brick < base.size() && base[brick] != kNone; }
+  uint64_t bytes() const { return base.capacity() * sizeof(uint32_t) + values.capacity() * sizeof(T); }
+  void shrink() {
+    if (values.empty()) std::vector<uint32_t>().swap(base);
+    base.shrink_to_fit();
+    values.shrink_to_fit();
+  }
+};
+
+/// Where a voxel's attributes are: its index in the dense arrays, its brick and its rank there.
+struct VoxelRef {
+  size_t index;
+  uint32_t brick;
+  uint32_t rank;
+};
+
+/// Code of a wholly diffuse voxel (Level::diffuse), the one not stored.
+constexpr uint8_t kAllDiffuse = 255;
+
+/// One level of a field: a two-level topology plus compact attributes.
 struct Level {
   int level = 0;
   double voxelSize = 0.0;
   uint32_t resolution = 0;
   float invVoxelSize = 0.0f;            ///< 1 / voxelSize, for the float cone lookups
   float voxelSizeF = 0.0f;              ///< voxelSize in float
-  std::unique_ptr<IndexTree> tree;      ///< brick coordinate -> brick index
+  std::unique_ptr<IndexTree> tree;      ///< superbrick coordinate -> superbrick index
+  std::vector<uint64_t> superMask;      ///< occupied bricks of the superbrick
+  std::vector<uint32_t> superBase;      ///< index of the superbrick's first brick
   std::vector<uint64_t> brickMask;      ///< occupied voxels of the brick
   std::vector<uint32_t> brickBase;      ///< index of the brick's first voxel
   /// Levels up to kDenseBrickLevel: brick coordinate -> brick index (or -1) in a flat array of
@@ -143,13 +185,19 @@ struct Level {
   std::vector<int32_t> denseBricks;
   std::vector<Half> coverage;
   std::vector<uint16_t> normal;
-  std::vector<uint8_t> albedo;          ///< 3 per voxel
+  /// Finest level: the diffuse fraction of the voxel's surface (unorm8), stored for the bricks
+  /// holding a voxel not wholly diffuse (kAllDiffuse elsewhere). Injection weighs by it; the
+  /// surfaces' albedo is not stored: photons carry the reflectance of the surface they landed
+  /// on (Photon::albedo), so the field holds reflected light only.
+  SparseBricks<uint8_t> diffuse;
   /// Surfaces are two-sided and each side keeps its own light (a panel lit from above stays
-  /// dark below): RGB9E5 radiance of the front (the side the voxel's normal points to) and of
-  /// the back; both empty before injection. Coarser levels: opacity-weighted means of the
-  /// children's sides, after turning each child to agree with the parent's normal.
-  std::vector<uint32_t> radiance;
-  std::vector<uint32_t> radianceBack;
+  /// dark below): RGB9E5 radiance of the front (side 0, the side the voxel's normal points to)
+  /// and of the back (side 1), each stored for the bricks where some voxel's side is lit (the
+  /// default 10k photons light a tenth of the dragon's level-10 voxels; a closed surface's back
+  /// is never lit). Coarser levels: opacity-weighted means of the children's sides, after
+  /// turning each child to agree with the parent's normal.
+  SparseBricks<uint32_t> radiance[2];
+  bool lit = false;                     ///< photons were injected (radiance holds their light)
   /// Mips only: opacity-weighted mean of |normal| per axis, 3 unorm8 per voxel (the finest
   /// level takes |normal| of its one mean normal).
   std::vector<uint8_t> axisFraction;
@@ -161,37 +209,46 @@ struct Level {
 
   size_t size() const { return coverage.size(); }
 
-  /// Index of voxel (i, j, k) in the attribute arrays, or -1 when inactive or outside.
-  int64_t find(int64_t i, int64_t j, int64_t k, IndexAccessor& acc) const {
-    if (i < 0 || j < 0 || k < 0 || i >= resolution || j >= resolution || k >= resolution) return -1;
+  /// Voxel (i, j, k), or false when inactive or outside.
+  bool find(int64_t i, int64_t j, int64_t k, IndexAccessor& acc, VoxelRef& out) const {
+    if (i < 0 || j < 0 || k < 0 || i >= resolution || j >= resolution || k >= resolution) return false;
     const int64_t brick = brickAt(int32_t(i >> 2), int32_t(j >> 2), int32_t(k >> 2), acc);
-    if (brick < 0) return -1;
-    const uint32_t b = uint32_t(brick);
-    const uint32_t bit = voxel::brickBit(uint32_t(i), uint32_t(j), uint32_t(k));
+    if (brick < 0) return false;
+    return voxelIn(uint32_t(brick), uint32_t(i), uint32_t(j), uint32_t(k), out);
+  }
+  /// Voxel (i, j, k) of brick `b` (which holds it), or false when inactive.
+  bool voxelIn(uint32_t b, uint32_t i, uint32_t j, uint32_t k, VoxelRef& out) const {
+    const uint32_t bit = voxel::brickBit(i, j, k);
     const uint64_t mask = brickMask[b];
-    if (!((mask >> bit) & 1u)) return -1;
-    return int64_t(brickBase[b]) + __builtin_popcountll(mask & ((uint64_t(1) << bit) - 1));
+    if (!((mask >> bit) & 1u)) return false;
+    out.brick = b;
+    out.rank = uint32_t(__builtin_popcountll(mask & ((uint64_t(1) << bit) - 1)));
+    out.index = size_t(brickBase[b]) + out.rank;
+    return true;
   }
 
   /// Index of brick (bi, bj, bk) (inside the level), or -1 when it has no voxel: from the flat
-  /// table where there is one, else a probe of the tree.
+  /// table where there is one, else a probe of the tree for its superbrick and the rank of the
+  /// brick's bit in the superbrick's mask.
   int64_t brickAt(int32_t bi, int32_t bj, int32_t bk, IndexAccessor& acc) const {
     if (!denseBricks.empty()) {
       const size_t side = resolution >> 2;
       return denseBricks[(size_t(bk) * side + size_t(bj)) * side + size_t(bi)];
     }
-    uint32_t b = 0;
-    return acc.probeValue(openvdb::Coord(bi, bj, bk), b) ? int64_t(b) : -1;
+    uint32_t s = 0;
+    if (!acc.probeValue(openvdb::Coord(bi >> 2, bj >> 2, bk >> 2), s)) return -1;
+    const uint32_t bit = voxel::brickBit(uint32_t(bi), uint32_t(bj), uint32_t(bk));
+    const uint64_t mask = superMask[s];
+    if (!((mask >> bit) & 1u)) return -1;
+    return int64_t(superBase[s]) + __builtin_popcountll(mask & ((uint64_t(1) << bit) - 1));
   }
 
   float opacity(size_t v) const { return std::min(1.0f, float(coverage[v])); }
-  Vec3 albedoAt(size_t v) const {
-    return Vec3(decodeUnorm8(albedo[3 * v]), decodeUnorm8(albedo[3 * v + 1]), decodeUnorm8(albedo[3 * v + 2]));
-  }
+  float diffuseAt(const VoxelRef& r) const { return decodeUnorm8(diffuse.get(r.brick, r.rank, kAllDiffuse)); }
+  Vec3 frontAt(const VoxelRef& r) const { return decodeRgb9e5(radiance[0].get(r.brick, r.rank, 0u)); }
+  Vec3 backAt(const VoxelRef& r) const { return decodeRgb9e5(radiance[1].get(r.brick, r.rank, 0u)); }
   /// Both sides' radiance summed.
-  Vec3 radianceAt(size_t v) const {
-    return radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]) + decodeRgb9e5(radianceBack[v]);
-  }
+  Vec3 radianceAt(const VoxelRef& r) const { return frontAt(r) + backAt(r); }
   Vec3 normalAt(size_t v) const { return decodeNormal(normal[v]); }
   Vec3 axisFractionAt(size_t v) const {
     if (axisFraction.empty()) return glm::abs(normalAt(v));
@@ -199,52 +256,57 @@ struct Level {
                 decodeUnorm8(axisFraction[3 * v + 2]));
   }
 
-  /// Visit every voxel: f(index, i, j, k), bricks in tree order (callers sort when they need
-  /// an order). The brick coordinates come from the tree, so no per-brick key is stored.
-  template <typename F> void forEachVoxel(F&& f) const {
-    for (auto it = tree->cbeginValueOn(); it; ++it) {
-      const openvdb::Coord c = it.getCoord();
-      const uint32_t b = *it, bi = uint32_t(c.x()), bj = uint32_t(c.y()), bk = uint32_t(c.z());
+  /// Visit the voxels of superbrick `s` at superbrick coordinate (si, sj, sk): f(ref, i, j, k),
+  /// in key order.
+  template <typename F> void forEachVoxelOf(uint32_t s, uint32_t si, uint32_t sj, uint32_t sk, F&& f) const {
+    uint64_t bricks = superMask[s];
+    uint32_t b = superBase[s];
+    while (bricks) {
+      const uint32_t bb = uint32_t(__builtin_ctzll(bricks));
+      bricks &= bricks - 1;
+      const uint32_t bi = (si << 2) | (bb >> 4), bj = (sj << 2) | ((bb >> 2) & 3u), bk = (sk << 2) | (bb & 3u);
       uint64_t mask = brickMask[b];
-      size_t v = brickBase[b];
+      VoxelRef r{brickBase[b], b, 0};
       while (mask) {
         const uint32_t bit = uint32_t(__builtin_ctzll(mask));
         mask &= mask - 1;
-        f(v++, (bi << 2) | (bit >> 4), (bj << 2) | ((bit >> 2) & 3u), (bk << 2) | (bit & 3u));
+        f(r, (bi << 2) | (bit >> 4), (bj << 2) | ((bit >> 2) & 3u), (bk << 2) | (bit & 3u));
+        ++r.index;
+        ++r.rank;
       }
+      ++b;
+    }
+  }
+  /// Visit every voxel: f(ref, i, j, k), superbricks in tree order (callers sort when they need
+  /// an order). The coordinates come from the tree, so no per-voxel key is stored.
+  template <typename F> void forEachVoxel(F&& f) const {
+    for (auto it = tree->cbeginValueOn(); it; ++it) {
+      const openvdb::Coord c = it.getCoord();
+      forEachVoxelOf(*it, uint32_t(c.x()), uint32_t(c.y()), uint32_t(c.z()), f);
     }
   }
 
-  /// Set the radiance of both sides.
-  void setRadiance(const std::vector<Vec3>& values, const std::vector<Vec3>& back) {
-    coneTable.clear();  // stale until buildConeTable runs again
-    radiance.resize(values.size());
-    for (size_t v = 0; v < values.size(); ++v) radiance[v] = encodeRgb9e5(values[v]);
-    radianceBack.resize(back.size());
-    for (size_t v = 0; v < back.size(); ++v) radianceBack[v] = encodeRgb9e5(back[v]);
-  }
-
-  /// Voxel v's cone-lookup attributes, decoded (coneTable's entry where there is one).
-  ConeVoxel coneVoxel(size_t v) const {
-    if (!coneTable.empty()) return coneTable[v];
+  /// Voxel r's cone-lookup attributes, decoded (coneTable's entry where there is one).
+  ConeVoxel coneVoxel(const VoxelRef& r) const {
+    if (!coneTable.empty()) return coneTable[r.index];
     ConeVoxel c;
-    c.projected = opacity(v) * axisFractionAt(v);
-    c.side = decodeNormalDirection(normal[v]);
-    c.front = radiance.empty() ? Vec3(0.0f) : decodeRgb9e5(radiance[v]);
-    c.back = radianceBack.empty() ? Vec3(0.0f) : decodeRgb9e5(radianceBack[v]);
+    c.projected = opacity(r.index) * axisFractionAt(r.index);
+    c.side = decodeNormalDirection(normal[r.index]);
+    c.front = frontAt(r);
+    c.back = backAt(r);
     return c;
   }
   /// Decode every voxel's cone-lookup attributes into coneTable.
   void buildConeTable() {
     coneTable.clear();
     std::vector<ConeVoxel> table(size());
-    for (size_t v = 0; v < size(); ++v) table[v] = coneVoxel(v);
+    forEachVoxel([&](const VoxelRef& r, uint32_t, uint32_t, uint32_t) { table[r.index] = coneVoxel(r); });
     coneTable = std::move(table);
   }
 
   uint64_t topologyBytes() const {
-    return (tree ? tree->memUsage() : 0) + brickMask.capacity() * sizeof(uint64_t) +
-           brickBase.capacity() * sizeof(uint32_t) + denseBricks.capacity() * sizeof(int32_t);
+    return (tree ? tree->memUsage() : 0) + (superMask.capacity() + brickMask.capacity()) * sizeof(uint64_t) +
+           (superBase.capacity() + brickBase.capacity()) * sizeof(uint32_t) + denseBricks.capacity() * sizeof(int32_t);
   }
 };
 
@@ -256,63 +318,116 @@ constexpr int kDenseBrickLevel = 8;
 /// cornell-box at level 6: cone gathers 21% faster, the same image to 4 digits of PSNR.
 constexpr int kConeTableLevel = 7;
 
-/// Build a level's topology and compact attributes from sorted full-precision arrays.
-Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
-  Level out;
-  out.level = level;
-  out.voxelSize = voxelSize;
-  out.invVoxelSize = float(1.0 / voxelSize);
-  out.voxelSizeF = float(voxelSize);
-  out.resolution = uint32_t(1) << level;
-  out.tree = std::make_unique<IndexTree>(uint32_t(0));
-  openvdb::tree::ValueAccessor<IndexTree> acc(*out.tree);
-  uint64_t lastBrick = ~uint64_t(0);
-  for (size_t v = 0; v < a.size(); ++v) {
-    const uint64_t brick = a.keys[v] >> 6;
-    if (brick != lastBrick) {
-      uint32_t bi, bj, bk;
-      voxel::unpackBrick(brick, bi, bj, bk);
-      acc.setValue(openvdb::Coord(int32_t(bi), int32_t(bj), int32_t(bk)), uint32_t(out.brickMask.size()));
-      lastBrick = brick;
-      out.brickMask.push_back(0);
-      out.brickBase.push_back(uint32_t(v));
-    }
-    out.brickMask.back() |= uint64_t(1) << (a.keys[v] & 63u);
+/// Builds a level from runs of full-precision voxels in key order (VoxelSink), encoding each
+/// run as it comes: the level never exists in full precision.
+class LevelBuilder {
+public:
+  LevelBuilder(int level, double voxelSize) {
+    m_out.level = level;
+    m_out.voxelSize = voxelSize;
+    m_out.invVoxelSize = float(1.0 / voxelSize);
+    m_out.voxelSizeF = float(voxelSize);
+    m_out.resolution = uint32_t(1) << level;
+    m_out.tree = std::make_unique<IndexTree>(uint32_t(0));
+    m_acc = std::make_unique<openvdb::tree::ValueAccessor<IndexTree>>(*m_out.tree);
   }
-  out.brickMask.shrink_to_fit();
-  out.brickBase.shrink_to_fit();
-  if (level <= kDenseBrickLevel) {
-    const size_t side = out.resolution >> 2;
-    out.denseBricks.assign(std::max<size_t>(1, side * side * side), -1);
-    for (auto it = out.tree->cbeginValueOn(); it; ++it) {
-      const openvdb::Coord c = it.getCoord();
-      out.denseBricks[(size_t(c.z()) * side + size_t(c.y())) * side + size_t(c.x())] = int32_t(*it);
-    }
-  }
-  out.coverage.resize(a.size());
-  out.normal.resize(a.size());
-  // Albedo is kept at the finest level only: injection reads it there, and nothing samples
-  // the albedo of coarser levels (cones gather outgoing radiance).
-  out.albedo.resize(a.albedo.empty() ? 0 : 3 * a.size());
-  for (size_t v = 0; v < a.size(); ++v) {
-    out.coverage[v] = Half(a.coverage[v]);
-    out.normal[v] = encodeNormal(a.normal[v]);
-    if (!a.albedo.empty())
-      for (int c = 0; c < 3; ++c) out.albedo[3 * v + c] = encodeUnorm8(a.albedo[v][c]);
-  }
-  if (!a.radiance.empty()) out.setRadiance(a.radiance, a.radianceBack);
-  out.axisFraction.resize(3 * a.axisFraction.size());
-  for (size_t v = 0; v < a.axisFraction.size(); ++v)
-    for (int c = 0; c < 3; ++c) out.axisFraction[3 * v + c] = encodeUnorm8(a.axisFraction[v][c]);
-  return out;
-}
 
-/// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1): opacity = sum of
-/// child opacities / 8; no albedo (see makeLevel). Surfaces are two-sided, so each child is
-/// first turned to agree with the most opaque child's normal (its front and back swapped when
-/// turned); normal = opacity-weighted sum of the turned normals, renormalized; front and back
-/// radiance = opacity-weighted means (sum(opacity * radiance) * voxel volume is preserved before
-/// storage). For cones: axisFraction = opacity-weighted mean |normal| per axis.
+  void append(const VoxelArrays& a) {
+    Level& o = m_out;
+    const bool lit = !a.radiance.empty();
+    o.lit = o.lit || lit;
+    for (size_t v = 0; v < a.size(); ++v) {
+      const uint64_t key = a.keys[v];
+      if ((key >> 6) != m_lastBrick) {
+        flushBrick();
+        if ((key >> 12) != m_lastSuper) {
+          uint32_t si, sj, sk;
+          voxel::unpackBrick(key >> 12, si, sj, sk);
+          m_acc->setValue(openvdb::Coord(int32_t(si), int32_t(sj), int32_t(sk)), uint32_t(o.superMask.size()));
+          o.superMask.push_back(0);
+          o.superBase.push_back(uint32_t(o.brickMask.size()));
+          m_lastSuper = key >> 12;
+        }
+        o.superMask.back() |= uint64_t(1) << ((key >> 6) & 63u);
+        o.brickMask.push_back(0);
+        o.brickBase.push_back(uint32_t(o.coverage.size()));
+        m_lastBrick = key >> 6;
+      }
+      o.brickMask.back() |= uint64_t(1) << (key & 63u);
+      o.coverage.push_back(Half(a.coverage[v]));
+      o.normal.push_back(encodeNormal(a.normal[v]));
+      if (!a.diffuse.empty()) m_diffuse.push_back(encodeUnorm8(a.diffuse[v]));
+      if (lit) {
+        m_radiance[0].push_back(encodeRgb9e5(a.radiance[v]));
+        m_radiance[1].push_back(encodeRgb9e5(a.radianceBack[v]));
+      }
+      if (!a.axisFraction.empty())
+        for (int c = 0; c < 3; ++c) o.axisFraction.push_back(encodeUnorm8(a.axisFraction[v][c]));
+    }
+  }
+
+  Level finish() {
+    flushBrick();
+    Level& o = m_out;
+    for (auto* v : {&o.superMask, &o.brickMask}) v->shrink_to_fit();
+    for (auto* v : {&o.superBase, &o.brickBase}) v->shrink_to_fit();
+    o.coverage.shrink_to_fit();
+    o.normal.shrink_to_fit();
+    o.axisFraction.shrink_to_fit();
+    o.diffuse.shrink();
+    for (SparseBricks<uint32_t>& side : o.radiance) side.shrink();
+    if (o.level <= kDenseBrickLevel) {
+      const size_t side = o.resolution >> 2;
+      o.denseBricks.assign(std::max<size_t>(1, side * side * side), -1);
+      for (auto it = o.tree->cbeginValueOn(); it; ++it) {
+        const openvdb::Coord c = it.getCoord();
+        uint64_t bricks = o.superMask[*it];
+        uint32_t b = o.superBase[*it];
+        while (bricks) {
+          const uint32_t bb = uint32_t(__builtin_ctzll(bricks));
+          bricks &= bricks - 1;
+          const size_t bi = (size_t(c.x()) << 2) | (bb >> 4), bj = (size_t(c.y()) << 2) | ((bb >> 2) & 3u),
+                       bk = (size_t(c.z()) << 2) | (bb & 3u);
+          o.denseBricks[(bk * side + bj) * side + bi] = int32_t(b++);
+        }
+      }
+    }
+    m_acc.reset();
+    return std::move(m_out);
+  }
+
+private:
+  /// The brick just completed: its diffuse fractions and each side's radiance are kept only
+  /// when some voxel of it needs them (SparseBricks).
+  void flushBrick() {
+    if (m_lastBrick == ~uint64_t(0)) return;
+    auto keep = [&](auto& sparse, auto& pending, auto none) {
+      const bool needed = std::any_of(pending.begin(), pending.end(), [&](auto c) { return c != none; });
+      if (needed) {
+        sparse.base.resize(m_out.brickMask.size() - 1, sparse.kNone);
+        sparse.base.push_back(uint32_t(sparse.values.size()));
+        sparse.values.insert(sparse.values.end(), pending.begin(), pending.end());
+      }
+      pending.clear();
+    };
+    keep(m_out.diffuse, m_diffuse, kAllDiffuse);
+    for (int side = 0; side < 2; ++side) keep(m_out.radiance[side], m_radiance[side], uint32_t(0));
+  }
+
+  Level m_out;
+  std::unique_ptr<openvdb::tree::ValueAccessor<IndexTree>> m_acc;
+  uint64_t m_lastBrick = ~uint64_t(0), m_lastSuper = ~uint64_t(0);
+  std::vector<uint8_t> m_diffuse;   ///< the current brick's
+  std::vector<uint32_t> m_radiance[2];  ///< the current brick's
+};
+
+/// 2x2x2 box restriction of `child` (parent (i, j, k) = child (i, j, k) >> 1), or the binomial
+/// over 4x4x4 (MipFilter::Gaussian): opacity = weighted sum of child opacities; no diffuse
+/// fraction (only injection reads it). Surfaces are two-sided, so each child is first turned
+/// to agree with the most opaque child's normal (its front and back swapped when turned);
+/// normal = opacity-weighted sum of the turned normals, renormalized; front and back radiance =
+/// opacity-weighted means (sum(opacity * radiance) * voxel volume is preserved before storage).
+/// For cones: axisFraction = opacity-weighted mean |normal| per axis.
 /// The weight a child voxel gives one parent, per axis, in eighths: box 4 (its own parent
 /// only, 4/8 per axis = 1/8 in 3D); Gaussian 3 to its own parent and 1 to the parent beside it
 /// on its side (the binomial [1 3 3 1] / 8 over the 4 children nearest the parent's centre).
@@ -320,83 +435,76 @@ Level makeLevel(int level, double voxelSize, const VoxelArrays& a) {
 /// conserved, and a plane stays one crossing (VoxelSample::projected) at every level.
 struct ChildShare {
   uint64_t parent;
-  uint32_t child;
+  VoxelRef child;
   float weight;
-  bool operator<(const ChildShare& o) const { return parent != o.parent ? parent < o.parent : child < o.child; }
+  bool operator<(const ChildShare& o) const {
+    return parent != o.parent ? parent < o.parent : child.index < o.child.index;
+  }
 };
 
-/// Every (parent, child, weight) share of `child`'s voxels, sorted by (parent key, child index),
-/// which is unique: one order at any thread count.
-std::vector<ChildShare> childShares(const Level& child, MipFilter filter) {
-  std::vector<ChildShare> shares;
-  const uint32_t parentRes = std::max(1u, child.resolution >> 1);
+/// The shares of `child`'s voxel (i, j, k) in the parents of superbrick `ps` (packBrick), added
+/// to `shares`.
+void addShares(const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k, uint32_t parentRes, MipFilter filter,
+               uint64_t ps, std::vector<ChildShare>& shares) {
+  const uint32_t c[3] = {i, j, k};
   if (filter == MipFilter::Box) {
-    shares.reserve(child.size());
-    child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-      shares.push_back({voxel::packKey(i >> 1, j >> 1, k >> 1), uint32_t(v), 0.125f});
-    });
-    tbb::parallel_sort(shares.begin(), shares.end());
-    return shares;
+    const uint64_t key = voxel::packKey(i >> 1, j >> 1, k >> 1);
+    if ((key >> 12) == ps) shares.push_back({key, r, 0.125f});
+    return;
   }
-  shares.reserve(child.size() * 8);
-  child.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-    const uint32_t c[3] = {i, j, k};
-    uint32_t own[3], other[3];
+  uint32_t own[3], other[3];
+  for (int a = 0; a < 3; ++a) {
+    own[a] = c[a] >> 1;
+    // An even child lies on its parent's low side, next to the parent below. At the
+    // field's faces the neighbour does not exist: its share goes to the own parent.
+    const int64_t n = (c[a] & 1u) ? int64_t(own[a]) + 1 : int64_t(own[a]) - 1;
+    other[a] = n < 0 || n >= int64_t(parentRes) ? own[a] : uint32_t(n);
+  }
+  const size_t first = shares.size();
+  for (int corner = 0; corner < 8; ++corner) {
+    uint32_t q[3];
+    float w = 1.0f;
     for (int a = 0; a < 3; ++a) {
-      own[a] = c[a] >> 1;
-      // An even child lies on its parent's low side, next to the parent below. At the
-      // field's faces the neighbour does not exist: its share goes to the own parent.
-      const int64_t n = (c[a] & 1u) ? int64_t(own[a]) + 1 : int64_t(own[a]) - 1;
-      other[a] = n < 0 || n >= int64_t(parentRes) ? own[a] : uint32_t(n);
+      const bool side = (corner >> a) & 1;
+      q[a] = side ? other[a] : own[a];
+      w *= side ? 0.125f : 0.375f;
     }
-    for (int corner = 0; corner < 8; ++corner) {
-      uint32_t q[3];
-      float w = 1.0f;
-      for (int a = 0; a < 3; ++a) {
-        const bool side = (corner >> a) & 1;
-        q[a] = side ? other[a] : own[a];
-        w *= side ? 0.125f : 0.375f;
+    const uint64_t key = voxel::packKey(q[0], q[1], q[2]);
+    if ((key >> 12) != ps) continue;
+    // A child whose neighbour was folded back names its own parent twice: merge those.
+    bool merged = false;
+    for (size_t s = first; s < shares.size() && !merged; ++s)
+      if (shares[s].parent == key) {
+        shares[s].weight += w;
+        merged = true;
       }
-      shares.push_back({voxel::packKey(q[0], q[1], q[2]), uint32_t(v), w});
-    }
-  });
-  // A child whose neighbour was folded back names its own parent twice: merge those.
-  tbb::parallel_sort(shares.begin(), shares.end());
-  size_t out = 0;
-  for (size_t s = 0; s < shares.size(); ++s) {
-    if (out > 0 && shares[out - 1].parent == shares[s].parent && shares[out - 1].child == shares[s].child)
-      shares[out - 1].weight += shares[s].weight;
-    else
-      shares[out++] = shares[s];
+    if (!merged) shares.push_back({key, r, w});
   }
-  shares.resize(out);
-  return shares;
 }
 
-/// One coarser level from `child` (VoxelField::buildMips).
-VoxelArrays restrictLevel(const Level& child, MipFilter filter) {
-  const std::vector<ChildShare> shares = childShares(child, filter);
-  VoxelArrays out;
-  const bool lit = !child.radiance.empty();
+/// The parents of superbrick `ps` from sorted `shares` (one parent's run after another), appended to `out`.
+void reduceShares(const Level& child, const std::vector<ChildShare>& shares, VoxelArrays& out) {
+  const bool lit = child.lit;
   for (size_t a = 0; a < shares.size();) {
     size_t end = a;
     size_t ref = a;  // the child that weighs most: the others turn to agree with it
     for (; end < shares.size() && shares[end].parent == shares[a].parent; ++end)
-      if (shares[end].weight * child.opacity(shares[end].child) > shares[ref].weight * child.opacity(shares[ref].child))
+      if (shares[end].weight * child.opacity(shares[end].child.index) >
+          shares[ref].weight * child.opacity(shares[ref].child.index))
         ref = end;
-    const Vec3 refNormal = child.normalAt(shares[ref].child);
+    const Vec3 refNormal = child.normalAt(shares[ref].child.index);
     double opSum = 0.0;
     DVec3 front(0.0), back(0.0), nrm(0.0), axes(0.0);
     for (size_t b = a; b < end; ++b) {
-      const size_t c = shares[b].child;
-      const double op = double(shares[b].weight) * child.opacity(c);
-      const Vec3 n = child.normalAt(c);
+      const VoxelRef& c = shares[b].child;
+      const double op = double(shares[b].weight) * child.opacity(c.index);
+      const Vec3 n = child.normalAt(c.index);
       const bool turned = glm::dot(n, refNormal) < 0.0f;
       opSum += op;
       nrm += op * DVec3(turned ? -n : n);
-      axes += op * DVec3(child.axisFractionAt(c));
+      axes += op * DVec3(child.axisFractionAt(c.index));
       if (lit) {
-        const DVec3 f = DVec3(decodeRgb9e5(child.radiance[c])), k = DVec3(decodeRgb9e5(child.radianceBack[c]));
+        const DVec3 f = DVec3(child.frontAt(c)), k = DVec3(child.backAt(c));
         front += op * (turned ? k : f);
         back += op * (turned ? f : k);
       }
@@ -412,7 +520,63 @@ VoxelArrays restrictLevel(const Level& child, MipFilter filter) {
     }
     a = end;
   }
-  return out;
+}
+
+/// One coarser level from `child` (VoxelField::buildMips), a parent superbrick at a time: its
+/// children lie in the 2^3 child superbricks below it (box) or the 4^3 around those (Gaussian);
+/// each parent's shares are summed in child index order, so the level is the same at any
+/// thread count. Parent superbricks go in parallel batches appended in key order.
+Level restrictLevel(const Level& child, MipFilter filter) {
+  const uint32_t parentRes = std::max(1u, child.resolution >> 1);
+  const int32_t childSupers = int32_t(std::max(1u, child.resolution >> voxel::kSuperLog2));
+  // The parent superbricks with a child: those above each child superbrick (and beside, for
+  // the Gaussian's reach across a superbrick's face), in key order.
+  std::vector<uint64_t> parents;
+  const int reach = filter == MipFilter::Box ? 0 : 1;
+  const int32_t parentSupers = std::max(1, int32_t((parentRes + (1u << voxel::kSuperLog2) - 1) >> voxel::kSuperLog2));
+  for (auto it = child.tree->cbeginValueOn(); it; ++it) {
+    const openvdb::Coord c = it.getCoord();
+    for (int dx = -reach; dx <= reach; ++dx)
+      for (int dy = -reach; dy <= reach; ++dy)
+        for (int dz = -reach; dz <= reach; ++dz) {
+          const int32_t p[3] = {(c.x() >> 1) + dx, (c.y() >> 1) + dy, (c.z() >> 1) + dz};
+          if (p[0] < 0 || p[1] < 0 || p[2] < 0 || p[0] >= parentSupers || p[1] >= parentSupers || p[2] >= parentSupers)
+            continue;
+          parents.push_back(voxel::packBrick(uint32_t(p[0]), uint32_t(p[1]), uint32_t(p[2])));
+        }
+  }
+  tbb::parallel_sort(parents.begin(), parents.end());
+  parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
+
+  LevelBuilder builder(child.level - 1, child.voxelSize * 2.0);
+  constexpr size_t kBatch = 256;
+  std::vector<VoxelArrays> batch(kBatch);
+  for (size_t first = 0; first < parents.size(); first += kBatch) {
+    const size_t count = std::min(kBatch, parents.size() - first);
+    tbb::parallel_for(size_t(0), count, [&](size_t n) {
+      const uint64_t ps = parents[first + n];
+      uint32_t p[3];
+      voxel::unpackBrick(ps, p[0], p[1], p[2]);
+      IndexAccessor acc(*child.tree);
+      std::vector<ChildShare> shares;
+      for (int32_t cx = 2 * int32_t(p[0]) - reach; cx <= 2 * int32_t(p[0]) + 1 + reach; ++cx)
+        for (int32_t cy = 2 * int32_t(p[1]) - reach; cy <= 2 * int32_t(p[1]) + 1 + reach; ++cy)
+          for (int32_t cz = 2 * int32_t(p[2]) - reach; cz <= 2 * int32_t(p[2]) + 1 + reach; ++cz) {
+            if (cx < 0 || cy < 0 || cz < 0 || cx >= childSupers || cy >= childSupers || cz >= childSupers) continue;
+            uint32_t s = 0;
+            if (!acc.probeValue(openvdb::Coord(cx, cy, cz), s)) continue;
+            child.forEachVoxelOf(s, uint32_t(cx), uint32_t(cy), uint32_t(cz),
+                                 [&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
+                                   addShares(r, i, j, k, parentRes, filter, ps, shares);
+                                 });
+          }
+      std::sort(shares.begin(), shares.end());
+      batch[n].clear();
+      reduceShares(child, shares, batch[n]);
+    });
+    for (size_t n = 0; n < count; ++n) builder.append(batch[n]);
+  }
+  return builder.finish();
 }
 
 /// A field's levels, finest first.
@@ -456,15 +620,14 @@ void trilinear(const Level& lv, const DVec3& origin, const Vec3& worldPos, doubl
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const double w = (dx ? f.x : 1.0 - f.x) * (dy ? f.y : 1.0 - f.y) * (dz ? f.z : 1.0 - f.z) * scale;
     if (w <= 0.0) continue;
-    const int64_t v = lv.find(int64_t(base.x) + dx, int64_t(base.y) + dy, int64_t(base.z) + dz, access);
-    if (v < 0) continue;
-    const double wo = w * lv.opacity(size_t(v));
+    VoxelRef r;
+    if (!lv.find(int64_t(base.x) + dx, int64_t(base.y) + dy, int64_t(base.z) + dz, access, r)) continue;
+    const double wo = w * lv.opacity(r.index);
     acc.weight += wo;
     acc.opacity += wo;
-    acc.radiance += wo * DVec3(lv.radianceAt(size_t(v)));
-    acc.normal += wo * DVec3(lv.normalAt(size_t(v)));
-    const DVec3 proj = wo * DVec3(lv.axisFractionAt(size_t(v)));
-    acc.projected += proj;
+    acc.radiance += wo * DVec3(lv.radianceAt(r));
+    acc.normal += wo * DVec3(lv.normalAt(r.index));
+    acc.projected += wo * DVec3(lv.axisFractionAt(r.index));
   }
 }
 
@@ -492,15 +655,13 @@ void coneTrilinear(const Level& lv, const Vec3& localPos, float scale, const Vec
     int64_t& b = bricks[slot];
     if (b == -2) b = lv.brickAt(i >> 2, j >> 2, k >> 2, access);
     if (b < 0) continue;
-    const uint32_t bit = voxel::brickBit(uint32_t(i), uint32_t(j), uint32_t(k));
-    const uint64_t mask = lv.brickMask[size_t(b)];
-    if (!((mask >> bit) & 1u)) continue;
-    const size_t v = lv.brickBase[size_t(b)] + size_t(__builtin_popcountll(mask & ((uint64_t(1) << bit) - 1)));
+    VoxelRef r;
+    if (!lv.voxelIn(uint32_t(b), uint32_t(i), uint32_t(j), uint32_t(k), r)) continue;
     // Projected area along the cone's direction, and the radiance of the side the apex sees
     // (the direction from the apex, not the axis: a lookup's reach takes in surfaces beside
     // the axis, and a ray from the apex reaches them from their apex side).
     const Vec3 centre = (Vec3(float(i), float(j), float(k)) + Vec3(0.5f)) * lv.voxelSizeF;
-    const ConeVoxel cv = lv.coneVoxel(v);
+    const ConeVoxel cv = lv.coneVoxel(r);
     const Vec3 proj = cv.projected * absD;
     const float area = w * (proj.x + proj.y + proj.z);
     density += area;
@@ -546,9 +707,11 @@ struct VoxelField::Impl {
 
 namespace {
 
-/// Flux per voxel and side (front: the side the voxel's normal points to).
+/// Reflected flux (photon power times the albedo it landed on) per voxel and side (front: the
+/// side the voxel's normal points to), only for the bricks some photon reached on that side (a
+/// few thousand photons reach a fraction of a fine level's bricks).
 struct SidedFlux {
-  std::vector<Vec3> front, back;
+  SparseBricks<Vec3> side[2];
 };
 
 /// The footprint spreads a photon over the surface it landed on: a voxel whose mean normal
@@ -556,10 +719,12 @@ struct SidedFlux {
 /// wall beside a lit floor), not to this one; a corner voxel's 45 degrees still counts.
 constexpr float kSameSurfaceCos = 0.5f;
 
-/// Splat `photons` into `lv` (see VoxelField::inject); returns flux per voxel and side.
+/// Splat `photons` into `lv` (see VoxelField::inject); returns the reflected flux per voxel and
+/// side, and adds the power that landed to `injected`, that found no voxel to `dropped`.
 SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& photons, float sigmaVoxels,
-                       DVec3& dropped, Progress* progress) {
-  SidedFlux flux{std::vector<Vec3>(lv.size(), Vec3(0.0f)), std::vector<Vec3>(lv.size(), Vec3(0.0f))};
+                       DVec3& injected, DVec3& dropped, Progress* progress) {
+  SidedFlux flux;
+  for (SparseBricks<Vec3>& f : flux.side) f.base.assign(lv.brickMask.size(), SparseBricks<Vec3>::kNone);
   const double radius = 3.0 * double(sigmaVoxels);
   const double inv2s2 = 1.0 / (2.0 * double(sigmaVoxels) * sigmaVoxels);
   // Photons go in fixed blocks; a wave of blocks is splatted in parallel into per-block lists,
@@ -567,30 +732,23 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
   constexpr size_t kBlock = 2048, kWave = 64;
   const size_t blocks = (photons.size() + kBlock - 1) / kBlock;
   struct Splat {
-    uint32_t voxel;
+    uint32_t brick;
+    uint8_t rank;
     bool back;
     Vec3 flux;
   };
   std::vector<std::vector<Splat>> lists(std::min(blocks, kWave));
-  std::vector<DVec3> blockDropped(lists.size());
-  // Each voxel's normal direction, decoded once, and |n|^2 (-1: no diffuse surface, which gathers
-  // no light): 125 voxels are tried per photon.
-  std::vector<glm::vec4> surface(lv.size());
-  tbb::parallel_for(size_t(0), lv.size(), [&](size_t v) {
-    const uint8_t* alb = &lv.albedo[3 * v];
-    const Vec3 n = decodeNormalDirection(lv.normal[v]);
-    surface[v] = glm::vec4(n, (alb[0] | alb[1] | alb[2]) == 0 ? -1.0f : glm::dot(n, n));
-  });
+  std::vector<DVec3> blockLanded(lists.size()), blockDropped(lists.size());
   for (size_t wave = 0; wave < blocks; wave += kWave) {
     if (progress && progress->cancelled()) throw CancelledError();
     const size_t waveBlocks = std::min(kWave, blocks - wave);
     tbb::parallel_for(size_t(0), waveBlocks, [&](size_t wb) {
       std::vector<Splat>& out = lists[wb];
       out.clear();
-      blockDropped[wb] = DVec3(0.0);
+      blockLanded[wb] = blockDropped[wb] = DVec3(0.0);
       IndexAccessor access(*lv.tree);
       struct Candidate {
-        uint32_t voxel;
+        VoxelRef voxel;
         float weight;
       };
       // Voxels whose (wound) normal faces the photon, and those facing away from it.
@@ -599,6 +757,7 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
       const size_t begin = (wave + wb) * kBlock, end = std::min(photons.size(), begin + kBlock);
       for (size_t p = begin; p < end; ++p) {
         const Photon& ph = photons[p];
+        const Vec3 reflected = ph.power * ph.albedo;
         const DVec3 q = (DVec3(ph.position) - origin) / lv.voxelSize;
         cand[0].clear();
         cand[1].clear();
@@ -616,22 +775,23 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
             for (int64_t k = lo[2]; k <= hi[2]; ++k) {
               const double d2 = sqr(double(i) + 0.5 - q.x) + sqr(double(j) + 0.5 - q.y) + sqr(double(k) + 0.5 - q.z);
               if (d2 > radius * radius) continue;
-              const int64_t v = lv.find(i, j, k, access);
-              if (v < 0) continue;
-              // Only voxels holding diffuse surface gather light.
-              const glm::vec4& sv = surface[size_t(v)];
-              if (sv.w < 0.0f) continue;
+              VoxelRef r;
+              if (!lv.find(i, j, k, access, r)) continue;
+              // Only diffuse surface gathers light.
+              const float diffuse = lv.diffuseAt(r);
+              if (!(diffuse > 0.0f)) continue;
               // Voxels of another surface (kSameSurfaceCos) take none of the photon.
-              const float cosNormals = glm::dot(Vec3(sv), ph.normal);
-              if (sqr(cosNormals) <= sqr(kSameSurfaceCos) * sv.w) continue;
-              // Gaussian footprint times the surface area the voxel holds: a uniform photon
-              // density then gives a uniform irradiance flux / area, where the plain Gaussian
-              // would give a voxel clipped to a sliver of surface the flux of a full voxel (and
-              // radiance up to 1 / sliver area).
+              const Vec3 n = decodeNormalDirection(lv.normal[r.index]);
+              const float cosNormals = glm::dot(n, ph.normal);
+              if (sqr(cosNormals) <= sqr(kSameSurfaceCos) * glm::dot(n, n)) continue;
+              // Gaussian footprint times the diffuse surface area the voxel holds: a uniform
+              // photon density then gives a uniform irradiance flux / area, where the plain
+              // Gaussian would give a voxel clipped to a sliver of surface the flux of a full
+              // voxel (and radiance up to 1 / sliver area).
               const double g = gauss[0][size_t(i - lo[0])] * gauss[1][size_t(j - lo[1])] * gauss[2][size_t(k - lo[2])];
-              const double w = g * double(lv.coverage[size_t(v)]);
+              const double w = g * double(lv.coverage[r.index]) * double(diffuse);
               const int back = cosNormals < 0.0f;
-              cand[back].push_back({uint32_t(v), float(w)});
+              cand[back].push_back({r, float(w)});
               wsum[back] += w;
             }
         // The photon lands on the side it arrived on: the front of the voxels that face it (a
@@ -641,17 +801,31 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
         const int side = wsum[0] > 0.0 ? 0 : 1;
         if (wsum[side] > 0.0) {
           for (const Candidate& c : cand[side])
-            out.push_back({c.voxel, side == 1, ph.power * float(double(c.weight) / wsum[side])});
+            out.push_back({c.voxel.brick, uint8_t(c.voxel.rank), side == 1, reflected * float(double(c.weight) / wsum[side])});
+          blockLanded[wb] += DVec3(ph.power);
           continue;
         }
-        const int64_t v = lv.find(int64_t(std::floor(q.x)), int64_t(std::floor(q.y)), int64_t(std::floor(q.z)), access);
-        if (v >= 0)
-          out.push_back({uint32_t(v), glm::dot(decodeNormalDirection(lv.normal[size_t(v)]), ph.normal) < 0.0f, ph.power});
-        else blockDropped[wb] += DVec3(ph.power);
+        VoxelRef r;
+        if (lv.find(int64_t(std::floor(q.x)), int64_t(std::floor(q.y)), int64_t(std::floor(q.z)), access, r)) {
+          out.push_back({r.brick, uint8_t(r.rank),
+                         glm::dot(decodeNormalDirection(lv.normal[r.index]), ph.normal) < 0.0f, reflected});
+          blockLanded[wb] += DVec3(ph.power);
+        } else {
+          blockDropped[wb] += DVec3(ph.power);
+        }
       }
     });
     for (size_t wb = 0; wb < waveBlocks; ++wb) {
-      for (const Splat& s : lists[wb]) (s.back ? flux.back : flux.front)[s.voxel] += s.flux;
+      for (const Splat& s : lists[wb]) {
+        SparseBricks<Vec3>& f = flux.side[s.back];
+        uint32_t& base = f.base[s.brick];
+        if (base == SparseBricks<Vec3>::kNone) {
+          base = uint32_t(f.values.size());
+          f.values.resize(f.values.size() + size_t(__builtin_popcountll(lv.brickMask[s.brick])), Vec3(0.0f));
+        }
+        f.values[size_t(base) + s.rank] += s.flux;
+      }
+      injected += blockLanded[wb];
       dropped += blockDropped[wb];
     }
     if (progress) progress->advance(std::min(photons.size(), (wave + waveBlocks) * kBlock) - wave * kBlock);
@@ -659,48 +833,68 @@ SidedFlux splatPhotons(const Level& lv, const DVec3& origin, const PhotonList& p
   return flux;
 }
 
-}  // namespace
-
 /// The voxels of `lv` with nonzero radiance, as a level of their own.
 Level keepLit(const Level& lv) {
-  std::vector<std::pair<uint64_t, uint32_t>> lit;
-  lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-    if (!isBlack(lv.radianceAt(v))) lit.emplace_back(voxel::packKey(i, j, k), uint32_t(v));
+  struct Lit {
+    uint64_t key;
+    VoxelRef ref;
+    bool operator<(const Lit& o) const { return key < o.key; }
+  };
+  std::vector<Lit> lit;
+  lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
+    if (!isBlack(lv.radianceAt(r))) lit.push_back({voxel::packKey(i, j, k), r});
   });
   std::sort(lit.begin(), lit.end());
   VoxelArrays a;
-  for (const auto& [key, v] : lit) {
-    a.keys.push_back(key);
-    a.coverage.push_back(float(lv.coverage[v]));
-    a.normal.push_back(lv.normalAt(v));
-    a.albedo.push_back(lv.albedoAt(v));
-    a.radiance.push_back(decodeRgb9e5(lv.radiance[v]));
-    a.radianceBack.push_back(decodeRgb9e5(lv.radianceBack[v]));
+  for (const Lit& l : lit) {
+    a.keys.push_back(l.key);
+    a.coverage.push_back(float(lv.coverage[l.ref.index]));
+    a.normal.push_back(lv.normalAt(l.ref.index));
+    a.diffuse.push_back(lv.diffuseAt(l.ref));
+    a.radiance.push_back(lv.frontAt(l.ref));
+    a.radianceBack.push_back(lv.backAt(l.ref));
   }
-  Level out = makeLevel(lv.level, lv.voxelSize, a);
+  LevelBuilder builder(lv.level, lv.voxelSize);
+  builder.append(a);
+  Level out = builder.finish();
   out.buildSeconds = lv.buildSeconds;
   return out;
 }
+
+}  // namespace
 
 void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut) {
   if (grid.empty()) return;
   Timer timer;
   Level& lv = grid.levels.front();
-  const SidedFlux flux = splatPhotons(lv, origin, photons, settings.kernelSigmaVoxels, dropped, progress);
-  // L = albedo / pi * E per side, E = flux / area (area = coverage * voxelSize^2 at the finest
-  // level: each side of a two-sided surface has all of it).
-  std::vector<Vec3> front(lv.size()), back(lv.size());
-  const double voxelArea = lv.voxelSize * lv.voxelSize;
   injectedOut = DVec3(0.0);
-  for (size_t v = 0; v < lv.size(); ++v) {
-    injectedOut += DVec3(flux.front[v]) + DVec3(flux.back[v]);
-    const double area = double(lv.coverage[v]) * voxelArea;
-    if (!(area > 0.0)) continue;
-    const DVec3 k = DVec3(lv.albedoAt(v)) * (1.0 / (3.14159265358979323846 * area));
-    front[v] = Vec3(k * DVec3(flux.front[v]));
-    back[v] = Vec3(k * DVec3(flux.back[v]));
+  SidedFlux flux = splatPhotons(lv, origin, photons, settings.kernelSigmaVoxels, injectedOut, dropped, progress);
+  // L = Phi_r / (pi A) per side, Phi_r the reflected flux (albedo times the power that landed),
+  // A = coverage * voxelSize^2 the voxel's whole surface (each side of a two-sided surface has
+  // all of it): the mean over the voxel's surface of the diffuse part's albedo / pi * E.
+  const double voxelArea = lv.voxelSize * lv.voxelSize;
+  const auto radianceOf = [&](const SparseBricks<Vec3>& f, uint32_t brick, uint32_t rank) {
+    const double area = double(lv.coverage[size_t(lv.brickBase[brick]) + rank]) * voxelArea;
+    return area > 0.0 ? encodeRgb9e5(Vec3(DVec3(f.values[size_t(f.base[brick]) + rank]) * (1.0 / (kPiD * area)))) : 0u;
+  };
+  lv.coneTable.clear();  // stale until buildConeTable runs again
+  // Each side in the flux's own sparse layout, the bricks no photon reached left out.
+  for (int side = 0; side < 2; ++side) {
+    SparseBricks<Vec3>& f = flux.side[side];
+    SparseBricks<uint32_t>& out = lv.radiance[side];
+    out = SparseBricks<uint32_t>();
+    if (!f.values.empty()) {
+      out.base = f.base;
+      out.values.resize(f.values.size());
+      tbb::parallel_for(uint32_t(0), uint32_t(lv.brickMask.size()), [&](uint32_t b) {
+        if (f.base[b] == SparseBricks<Vec3>::kNone) return;
+        const uint32_t n = uint32_t(__builtin_popcountll(lv.brickMask[b]));
+        for (uint32_t r = 0; r < n; ++r) out.values[size_t(f.base[b]) + r] = radianceOf(f, b, r);
+      });
+    }
+    f = SparseBricks<Vec3>();
   }
-  lv.setRadiance(front, back);
+  lv.lit = true;
   // Mips built before are stale: dropped, buildMips makes them anew (rebuilding them here too
   // built every mip twice per pass of a progressive render).
   grid.levels.resize(1);
@@ -711,6 +905,32 @@ VoxelField::VoxelField() : m_impl(std::make_unique<Impl>()) {}
 VoxelField::~VoxelField() = default;
 VoxelField::VoxelField(VoxelField&&) noexcept = default;
 VoxelField& VoxelField::operator=(VoxelField&&) noexcept = default;
+
+namespace {
+/// The cube a field of `scene` covers: its bounds' lower corner less the padding, its longest
+/// side plus twice the padding.
+void fieldCube(const Scene& scene, double padding, DVec3& origin, double& extent) {
+  const Bounds3& sb = scene.bounds();
+  const DVec3 diag = DVec3(sb.hi) - DVec3(sb.lo);
+  const double side = std::max(diag.x, std::max(diag.y, diag.z));
+  const double pad = padding * side;
+  origin = DVec3(sb.lo) - DVec3(pad);
+  // Pad by a relative 1e-6 so the max corner falls inside the last voxel, not on its far face.
+  extent = (side + 2.0 * pad) * (1.0 + 1e-6);
+}
+}  // namespace
+
+void VoxelField::checkScene(const Scene& scene, const std::string& what) const {
+  const Impl& f = *m_impl;
+  DVec3 origin;
+  double extent;
+  fieldCube(scene, f.settings.padding, origin, extent);
+  const double tol = 1e-9 * std::max(std::abs(extent), 1e-300);
+  if (std::abs(extent - f.extent) > tol || glm::length(origin - f.origin) > tol)
+    throw SettingsError(what + ": the field was voxelized for another scene (it covers a cube of side " +
+                        std::to_string(f.extent) + " at (" + std::to_string(f.origin.x) + ", " + std::to_string(f.origin.y) +
+                        ", " + std::to_string(f.origin.z) + "), this scene needs side " + std::to_string(extent) + ")");
+}
 
 VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress,
                                 const std::vector<Photon>* causticPhotons) {
@@ -734,27 +954,26 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
   VoxelField field;
   Impl& f = *field.m_impl;
   f.settings = settings;
-  const Bounds3& sb = scene.bounds();
-  const DVec3 diag = DVec3(sb.hi) - DVec3(sb.lo);
-  const double side = std::max(diag.x, std::max(diag.y, diag.z));
-  const double pad = settings.padding * side;
-  f.origin = DVec3(sb.lo) - DVec3(pad);
+  fieldCube(scene, settings.padding, f.origin, f.extent);
   f.originF = Vec3(f.origin);
-  // Pad by a relative 1e-6 so the max corner falls inside the last voxel, not on its far face.
-  f.extent = (side + 2.0 * pad) * (1.0 + 1e-6);
   if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
   f.bounds = Bounds3(Vec3(f.origin), Vec3(f.origin + DVec3(f.extent)));
 
   auto build = [&](Grid& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
     Timer timer;
     const double vs = f.voxelSize(level);
-    VoxelArrays a = voxel::voxelizeTriangles(scene, f.origin, vs, uint32_t(1) << level, progress, onlyBricks);
-    if (countArea) {
-      double area = 0.0;
-      for (float c : a.coverage) area += double(c);
-      f.surfaceArea = area * vs * vs;
-    }
-    grid.levels.push_back(makeLevel(level, vs, a));
+    LevelBuilder builder(level, vs);
+    double area = 0.0;
+    voxel::voxelizeTriangles(
+        scene, f.origin, vs, uint32_t(1) << level, progress,
+        [&](voxel::VoxelArrays& run) {
+          if (countArea)
+            for (float c : run.coverage) area += double(c);
+          builder.append(run);
+        },
+        onlyBricks);
+    if (countArea) f.surfaceArea = area * vs * vs;
+    grid.levels.push_back(builder.finish());
     grid.levels.back().buildSeconds = timer.seconds();
   };
   build(f.main, settings.level, true, nullptr);
@@ -819,12 +1038,9 @@ void VoxelField::buildMips(Progress* progress) {
     while (grid->levels.back().level > f.settings.coarsestLevel) {
       if (progress && progress->cancelled()) throw CancelledError();
       Timer t;
-      const Level& child = grid->levels.back();
-      VoxelArrays a = restrictLevel(child, f.settings.mipFilter);
-      const int level = child.level - 1;
-      const double vs = child.voxelSize * 2.0;
-      grid->levels.push_back(makeLevel(level, vs, a));
-      grid->levels.back().buildSeconds = t.seconds();
+      Level parent = restrictLevel(grid->levels.back(), f.settings.mipFilter);
+      parent.buildSeconds = t.seconds();
+      grid->levels.push_back(std::move(parent));
       if (progress) progress->advance(1);
     }
     if (progress) progress->finish();
@@ -850,13 +1066,13 @@ VoxelSample VoxelField::lookup(const Vec3& worldPos, int level) const {
   if (!lv) return {};
   const DVec3 q = glm::floor((DVec3(worldPos) - m_impl->origin) / lv->voxelSize);
   IndexAccessor access(*lv->tree);
-  const int64_t v = lv->find(int64_t(q.x), int64_t(q.y), int64_t(q.z), access);
-  if (v < 0) return {};
+  VoxelRef r;
+  if (!lv->find(int64_t(q.x), int64_t(q.y), int64_t(q.z), access, r)) return {};
   VoxelSample s;
-  s.opacity = lv->opacity(size_t(v));
-  s.projected = s.opacity * lv->axisFractionAt(size_t(v));
-  s.radiance = lv->radianceAt(size_t(v));
-  s.normal = lv->normalAt(size_t(v));
+  s.opacity = lv->opacity(r.index);
+  s.projected = s.opacity * lv->axisFractionAt(r.index);
+  s.radiance = lv->radianceAt(r);
+  s.normal = lv->normalAt(r.index);
   return s;
 }
 
@@ -929,9 +1145,9 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     row("opacity", lv.coverage.capacity() * sizeof(Half), 0.0);
     row("normal", lv.normal.capacity() * sizeof(uint16_t), 0.0);
     if (!lv.axisFraction.empty()) row("axes", lv.axisFraction.capacity() * sizeof(uint8_t), 0.0);
-    if (!lv.albedo.empty()) row("albedo", lv.albedo.capacity() * sizeof(uint8_t), 0.0);
-    row("radiance", lv.radiance.capacity() * sizeof(uint32_t), finest ? m_impl->main.injectSeconds : 0.0);
-    if (!lv.radianceBack.empty()) row("radiance_back", lv.radianceBack.capacity() * sizeof(uint32_t), 0.0);
+    if (finest) row("diffuse", lv.diffuse.bytes(), 0.0);
+    row("radiance", lv.radiance[0].bytes(), finest ? m_impl->main.injectSeconds : 0.0);
+    row("radiance_back", lv.radiance[1].bytes(), 0.0);
     if (!lv.coneTable.empty()) row("cone_table", lv.coneTable.capacity() * sizeof(ConeVoxel), 0.0);
   }
   for (const Level& lv : m_impl->caustic.levels) {
@@ -942,7 +1158,7 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     s.activeVoxels = lv.size();
     s.leaves = lv.tree ? lv.tree->leafCount() : 0;
     s.bytes = lv.topologyBytes() + lv.coverage.capacity() * sizeof(Half) + lv.normal.capacity() * sizeof(uint16_t) +
-              lv.albedo.capacity() + (lv.radiance.capacity() + lv.radianceBack.capacity()) * sizeof(uint32_t) +
+              lv.diffuse.bytes() + lv.radiance[0].bytes() + lv.radiance[1].bytes() +
               lv.coneTable.capacity() * sizeof(ConeVoxel);
     s.seconds = lv.buildSeconds;
     rows.push_back(s);
@@ -956,48 +1172,152 @@ uint64_t VoxelField::memoryBytes() const {
   return total;
 }
 
+namespace {
+
+/// Version of the .vdb layout VoxelField::write produces and VoxelField::read accepts.
+constexpr int32_t kFieldFileVersion = 2;
+
+/// OpenVDB puts voxel centres at integer index coordinates: voxel (i, j, k) of ours has its
+/// centre at origin + (i + 0.5) * voxelSize.
+openvdb::math::Transform::Ptr transformFor(const DVec3& origin, double voxelSize) {
+  auto xform = openvdb::math::Transform::createLinearTransform(voxelSize);
+  xform->postTranslate(openvdb::Vec3d(origin.x, origin.y, origin.z) + openvdb::Vec3d(0.5 * voxelSize));
+  return xform;
+}
+
+/// The grids of one level under `prefix` ("" for the main grid, "caustic_" for the caustic
+/// grid): coverage and normal of every voxel; each side's radiance, the diffuse fraction and the
+/// mips' axis fractions where they differ from their defaults (0, 1, none). Each is a task that
+/// builds it (write() runs them in parallel), in file order.
+using GridTask = std::function<openvdb::GridBase::Ptr()>;
+void addLevelGrids(const Level& lv, const DVec3& origin, bool finest, const std::string& prefix, std::vector<GridTask>& tasks) {
+  const std::string l = "_L" + std::to_string(lv.level);
+  const openvdb::math::Transform::Ptr xform = transformFor(origin, lv.voxelSize);
+  auto floatGrid = [&lv, xform, l, prefix](const std::string& name, float background, bool all, auto value) -> GridTask {
+    return [=, &lv]() -> openvdb::GridBase::Ptr {
+      auto grid = openvdb::FloatGrid::create(background);
+      grid->setName(prefix + name + l);
+      grid->setTransform(xform->copy());
+      grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+      auto acc = grid->getAccessor();
+      lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
+        const float v = value(r);
+        if (all || v != background) acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), v);
+      });
+      return grid;
+    };
+  };
+  auto vecGrid = [&lv, xform, l, prefix](const std::string& name, bool all, auto value) -> GridTask {
+    return [=, &lv]() -> openvdb::GridBase::Ptr {
+      auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+      grid->setName(prefix + name + l);
+      grid->setTransform(xform->copy());
+      auto acc = grid->getAccessor();
+      lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
+        const Vec3 x = value(r);
+        if (all || !isBlack(x))
+          acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), openvdb::Vec3s(x.x, x.y, x.z));
+      });
+      return grid;
+    };
+  };
+  const Level* level = &lv;
+  // The coverage grid's active voxels are the level's (a sliver's coverage may round to zero
+  // in half precision: it stays active).
+  tasks.push_back(floatGrid("coverage", 0.0f, true, [level](const VoxelRef& r) { return float(level->coverage[r.index]); }));
+  tasks.push_back(vecGrid("normal", true, [level](const VoxelRef& r) { return level->normalAt(r.index); }));
+  if (lv.lit) {
+    tasks.push_back(vecGrid("radiance", false, [level](const VoxelRef& r) { return level->frontAt(r); }));
+    tasks.push_back(vecGrid("radiance_back", false, [level](const VoxelRef& r) { return level->backAt(r); }));
+  }
+  if (!lv.axisFraction.empty())
+    tasks.push_back(vecGrid("axes", true, [level](const VoxelRef& r) { return level->axisFractionAt(r.index); }));
+  if (finest) tasks.push_back(floatGrid("diffuse", 1.0f, false, [level](const VoxelRef& r) { return level->diffuseAt(r); }));
+}
+
+/// One level back from the grids addLevelGrids wrote (missing grids: their defaults).
+Level readLevel(openvdb::io::File& file, const std::string& path, const std::string& prefix, int level, double voxelSize,
+                bool mip) {
+  const std::string l = "_L" + std::to_string(level);
+  auto grid = [&](const std::string& name, bool required) -> openvdb::GridBase::Ptr {
+    if (!file.hasGrid(prefix + name + l)) {
+      if (required) throw Error(path + ": not a voxcone field: no grid '" + prefix + name + l + "'");
+      return nullptr;
+    }
+    return file.readGrid(prefix + name + l);
+  };
+  auto typed = [&](auto tag, const openvdb::GridBase::Ptr& g, const std::string& name) {
+    using GridT = typename decltype(tag)::type;
+    auto t = openvdb::gridPtrCast<GridT>(g);
+    if (g && !t) throw Error(path + ": grid '" + prefix + name + l + "' has type " + g->type() + ", not " + GridT::gridType());
+    return t;
+  };
+  struct FloatTag { using type = openvdb::FloatGrid; };
+  struct VecTag { using type = openvdb::Vec3SGrid; };
+  const auto coverage = typed(FloatTag{}, grid("coverage", true), "coverage");
+  const auto normal = typed(VecTag{}, grid("normal", true), "normal");
+  const auto front = typed(VecTag{}, grid("radiance", false), "radiance");
+  const auto back = typed(VecTag{}, grid("radiance_back", false), "radiance_back");
+  const auto axes = typed(VecTag{}, grid("axes", mip), "axes");
+  const auto diffuse = typed(FloatTag{}, grid("diffuse", false), "diffuse");
+  if (bool(front) != bool(back)) throw Error(path + ": grid '" + prefix + "radiance" + l + "' needs its '_back' grid");
+
+  // The voxels in key order, from the coverage grid's active voxels.
+  const int64_t res = int64_t(1) << level;
+  std::vector<uint64_t> keys;
+  keys.reserve(size_t(coverage->activeVoxelCount()));
+  for (auto it = coverage->tree().cbeginValueOn(); it; ++it) {
+    const openvdb::Coord c = it.getCoord();
+    if (c.x() < 0 || c.y() < 0 || c.z() < 0 || c.x() >= res || c.y() >= res || c.z() >= res || !(*it >= 0.0f && *it <= 65504.0f))
+      throw Error(path + ": grid '" + prefix + "coverage" + l + "' has a voxel outside the level or a coverage out of range");
+    keys.push_back(voxel::packKey(uint32_t(c.x()), uint32_t(c.y()), uint32_t(c.z())));
+  }
+  tbb::parallel_sort(keys.begin(), keys.end());
+
+  LevelBuilder builder(level, voxelSize);
+  auto covAcc = coverage->getConstAccessor();
+  auto nrmAcc = normal->getConstAccessor();
+  std::optional<openvdb::Vec3SGrid::ConstAccessor> frontAcc, backAcc, axesAcc;
+  std::optional<openvdb::FloatGrid::ConstAccessor> diffAcc;
+  if (front) frontAcc.emplace(front->getConstAccessor()), backAcc.emplace(back->getConstAccessor());
+  if (axes) axesAcc.emplace(axes->getConstAccessor());
+  if (diffuse) diffAcc.emplace(diffuse->getConstAccessor());
+  const auto vec = [](const openvdb::Vec3s& v) { return Vec3(v.x(), v.y(), v.z()); };
+  constexpr size_t kRun = 1 << 16;
+  VoxelArrays run;
+  for (size_t first = 0; first < keys.size(); first += kRun) {
+    run.clear();
+    for (size_t n = first; n < std::min(keys.size(), first + kRun); ++n) {
+      uint32_t i, j, k;
+      voxel::unpackKey(keys[n], i, j, k);
+      const openvdb::Coord c{int32_t(i), int32_t(j), int32_t(k)};
+      run.keys.push_back(keys[n]);
+      run.coverage.push_back(covAcc.getValue(c));
+      run.normal.push_back(vec(nrmAcc.getValue(c)));
+      if (!mip) run.diffuse.push_back(diffAcc ? diffAcc->getValue(c) : 1.0f);
+      if (front) {
+        run.radiance.push_back(vec(frontAcc->getValue(c)));
+        run.radianceBack.push_back(vec(backAcc->getValue(c)));
+      }
+      if (axes) run.axisFraction.push_back(vec(axesAcc->getValue(c)));
+    }
+    builder.append(run);
+  }
+  Level out = builder.finish();
+  out.lit = bool(front);
+  return out;
+}
+
+}  // namespace
+
 void VoxelField::write(const std::string& path, const nlohmann::json& metadata) const {
   std::call_once(g_openvdbInit, [] { openvdb::initialize(); });
   const Impl& f = *m_impl;
-  openvdb::GridPtrVec grids;
-  auto transformFor = [&](const Level& lv) {
-    // OpenVDB puts voxel centres at integer index coordinates: voxel (i, j, k) of ours has its
-    // centre at origin + (i + 0.5) * voxelSize.
-    auto xform = openvdb::math::Transform::createLinearTransform(lv.voxelSize);
-    xform->postTranslate(openvdb::Vec3d(f.origin.x, f.origin.y, f.origin.z) + openvdb::Vec3d(0.5 * lv.voxelSize));
-    return xform;
-  };
-  auto floatGrid = [&](const Level& lv, const std::string& name, auto&& value) {
-    auto grid = openvdb::FloatGrid::create(0.0f);
-    grid->setName(name);
-    grid->setTransform(transformFor(lv));
-    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
-    auto acc = grid->getAccessor();
-    lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-      acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), value(v));
-    });
-    grids.push_back(grid);
-  };
-  auto vecGrid = [&](const Level& lv, const std::string& name, auto&& value) {
-    auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
-    grid->setName(name);
-    grid->setTransform(transformFor(lv));
-    auto acc = grid->getAccessor();
-    lv.forEachVoxel([&](size_t v, uint32_t i, uint32_t j, uint32_t k) {
-      const Vec3 x = value(v);
-      acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), openvdb::Vec3s(x.x, x.y, x.z));
-    });
-    grids.push_back(grid);
-  };
-  for (const Level& lv : f.main.levels) {
-    const std::string l = std::to_string(lv.level);
-    floatGrid(lv, "opacity_L" + l, [&](size_t v) { return lv.opacity(v); });
-    vecGrid(lv, "normal_L" + l, [&](size_t v) { return lv.normalAt(v); });
-    if (!lv.albedo.empty()) vecGrid(lv, "albedo_L" + l, [&](size_t v) { return lv.albedoAt(v); });
-    vecGrid(lv, "radiance_L" + l, [&](size_t v) { return lv.radianceAt(v); });
-  }
-  for (const Level& lv : f.caustic.levels)
-    vecGrid(lv, "caustic_L" + std::to_string(lv.level), [&](size_t v) { return lv.radianceAt(v); });
+  std::vector<GridTask> tasks;
+  for (const Level& lv : f.main.levels) addLevelGrids(lv, f.origin, &lv == &f.main.levels.front(), "", tasks);
+  for (const Level& lv : f.caustic.levels) addLevelGrids(lv, f.origin, true, "caustic_", tasks);
+  openvdb::GridPtrVec grids(tasks.size());
+  tbb::parallel_for(size_t(0), tasks.size(), [&](size_t t) { grids[t] = tasks[t](); });
 
   openvdb::MetaMap meta;
   // The caller's keys go under "voxcone:" so they never clash with the typed keys below.
@@ -1005,10 +1325,19 @@ void VoxelField::write(const std::string& path, const nlohmann::json& metadata) 
     for (auto it = metadata.begin(); it != metadata.end(); ++it)
       meta.insertMeta("voxcone:" + it.key(),
                       openvdb::StringMetadata(it->is_string() ? it->get<std::string>() : it->dump()));
+  meta.insertMeta("field_version", openvdb::Int32Metadata(kFieldFileVersion));
   meta.insertMeta("level", openvdb::Int32Metadata(f.settings.level));
   meta.insertMeta("coarsest_level", openvdb::Int32Metadata(f.settings.coarsestLevel));
-  meta.insertMeta("caustic_level", openvdb::Int32Metadata(f.settings.causticLevel));
+  meta.insertMeta("caustic_level", openvdb::Int32Metadata(f.caustic.empty() ? 0 : f.settings.causticLevel));
+  meta.insertMeta("kernel_sigma", openvdb::FloatMetadata(f.settings.kernelSigmaVoxels));
+  meta.insertMeta("padding", openvdb::DoubleMetadata(f.settings.padding));
+  meta.insertMeta("mip_filter", openvdb::StringMetadata(f.settings.mipFilter == MipFilter::Box ? "box" : "gaussian"));
   meta.insertMeta("voxel_size", openvdb::DoubleMetadata(f.voxelSize(f.settings.level)));
+  meta.insertMeta("origin", openvdb::Vec3DMetadata(openvdb::Vec3d(f.origin.x, f.origin.y, f.origin.z)));
+  meta.insertMeta("extent", openvdb::DoubleMetadata(f.extent));
+  meta.insertMeta("surface_area", openvdb::DoubleMetadata(f.surfaceArea));
+  meta.insertMeta("injected_power", openvdb::Vec3DMetadata(openvdb::Vec3d(f.injected.x, f.injected.y, f.injected.z)));
+  meta.insertMeta("dropped_power", openvdb::Vec3DMetadata(openvdb::Vec3d(f.dropped.x, f.dropped.y, f.dropped.z)));
   meta.insertMeta("global_photons", openvdb::Int64Metadata(int64_t(f.globalPhotons)));
   meta.insertMeta("caustic_photons", openvdb::Int64Metadata(int64_t(f.causticPhotons)));
 
@@ -1021,6 +1350,63 @@ void VoxelField::write(const std::string& path, const nlohmann::json& metadata) 
       throw Error(path + ": cannot write OpenVDB file: " + e.what());
     }
   });
+}
+
+VoxelField VoxelField::read(const std::string& path) {
+  std::call_once(g_openvdbInit, [] { openvdb::initialize(); });
+  VoxelField field;
+  Impl& f = *field.m_impl;
+  try {
+    openvdb::io::File file(path);
+    file.open(false);  // read every grid whole: each level is decoded once
+    const openvdb::MetaMap::Ptr meta = file.getMetadata();
+    auto need = [&](const char* key) {
+      if (!(*meta)[key]) throw Error(path + ": not a voxcone field: no metadata '" + std::string(key) + "'");
+    };
+    need("field_version");
+    const int32_t version = meta->metaValue<int32_t>("field_version");
+    if (version != kFieldFileVersion)
+      throw Error(path + ": voxcone field version " + std::to_string(version) + ", this build reads version " +
+                  std::to_string(kFieldFileVersion) + " (voxelize the scene again)");
+    for (const char* key : {"level", "coarsest_level", "caustic_level", "kernel_sigma", "padding", "mip_filter", "origin",
+                            "extent", "surface_area", "injected_power", "dropped_power", "global_photons", "caustic_photons"})
+      need(key);
+    VoxelSettings& s = f.settings;
+    s.level = meta->metaValue<int32_t>("level");
+    s.coarsestLevel = meta->metaValue<int32_t>("coarsest_level");
+    s.causticLevel = meta->metaValue<int32_t>("caustic_level");
+    s.kernelSigmaVoxels = meta->metaValue<float>("kernel_sigma");
+    s.padding = meta->metaValue<double>("padding");
+    s.mipFilter = meta->metaValue<std::string>("mip_filter") == "gaussian" ? MipFilter::Gaussian : MipFilter::Box;
+    if (s.level < 1 || s.level > 13 || s.coarsestLevel < 0 || s.coarsestLevel > s.level || s.causticLevel < 0 ||
+        s.causticLevel > 13)
+      throw Error(path + ": voxcone field with levels out of range (level " + std::to_string(s.level) + ", coarsest " +
+                  std::to_string(s.coarsestLevel) + ", caustic " + std::to_string(s.causticLevel) + ")");
+    const openvdb::Vec3d o = meta->metaValue<openvdb::Vec3d>("origin");
+    f.origin = DVec3(o.x(), o.y(), o.z());
+    f.originF = Vec3(f.origin);
+    f.extent = meta->metaValue<double>("extent");
+    if (!(f.extent > 0.0) || !std::isfinite(f.extent)) throw Error(path + ": voxcone field of extent " + std::to_string(f.extent));
+    f.bounds = Bounds3(Vec3(f.origin), Vec3(f.origin + DVec3(f.extent)));
+    f.surfaceArea = meta->metaValue<double>("surface_area");
+    const openvdb::Vec3d inj = meta->metaValue<openvdb::Vec3d>("injected_power"),
+                         drop = meta->metaValue<openvdb::Vec3d>("dropped_power");
+    f.injected = DVec3(inj.x(), inj.y(), inj.z());
+    f.dropped = DVec3(drop.x(), drop.y(), drop.z());
+    f.globalPhotons = uint64_t(meta->metaValue<int64_t>("global_photons"));
+    f.causticPhotons = uint64_t(meta->metaValue<int64_t>("caustic_photons"));
+    for (int level = s.level; level >= s.coarsestLevel; --level)
+      f.main.levels.push_back(readLevel(file, path, "", level, f.voxelSize(level), level != s.level));
+    if (s.causticLevel > 0)
+      f.caustic.levels.push_back(readLevel(file, path, "caustic_", s.causticLevel, f.voxelSize(s.causticLevel), false));
+    file.close();
+  } catch (const openvdb::Exception& e) {
+    throw Error(path + ": cannot read OpenVDB file: " + e.what());
+  }
+  for (Grid* grid : {&f.main, &f.caustic})
+    for (Level& lv : grid->levels)
+      if (lv.level <= kConeTableLevel && lv.lit) lv.buildConeTable();
+  return field;
 }
 
 }  // namespace voxcone

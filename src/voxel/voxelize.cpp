@@ -32,6 +32,7 @@ static_assert(sizeof(Contribution) == 16, "keep the transient records at 16 byte
 struct WorkItem {
   uint32_t triangle;
   int32_t lo[3], hi[3];  ///< inclusive voxel range
+  bool single;           ///< the whole triangle lies in one voxel
 };
 
 /// Triangles whose voxel range exceeds this many voxels are cut into slabs of about this size.
@@ -101,8 +102,8 @@ double clippedTriangleArea(const DVec3 tri[3], const DVec3& lo) {
   return 0.5 * glm::length(sum);
 }
 
-VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,
-                              Progress* progress, const std::vector<uint64_t>* onlyBricks) {
+size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,
+                         Progress* progress, const VoxelSink& sink, const std::vector<uint64_t>* onlyBricks) {
   const size_t triCount = scene.triangleCount();
   const double invVoxel = 1.0 / voxelSize;
   const int32_t maxIndex = int32_t(resolution) - 1;
@@ -153,7 +154,7 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
       if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
       const UVec3& tv = scene.triangles[t];
       const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
-      WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}};
+      WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}, false};
       int64_t count = 1;
       for (int a = 0; a < 3; ++a) {
         const double mn = std::min(p0[a], std::min(p1[a], p2[a])), mx = std::max(p0[a], std::max(p1[a], p2[a]));
@@ -162,6 +163,7 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
         count *= int64_t(item.hi[a] - item.lo[a] + 1);
       }
       if (!reachesListed(item.lo, item.hi)) continue;
+      item.single = count == 1;
       if (count <= kSlabVoxels) {
         local.push_back(item);
         continue;
@@ -190,102 +192,56 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
     std::vector<WorkItem>().swap(c);
   }
 
-  if (progress) progress->start("voxelize", items.size());
-  // Every (voxel, triangle) overlap with its clipped area, per fixed chunk of work items, so
-  // that the chunks concatenated in order list them by triangle.
-  constexpr size_t kChunk = 1024;
-  std::vector<std::vector<Contribution>> chunks((items.size() + kChunk - 1) / kChunk);
-  std::atomic<bool> cancelled{false};
-  tbb::parallel_for(size_t(0), chunks.size(), [&](size_t chunk) {
-    if (cancelled.load(std::memory_order_relaxed)) return;
-    if (progress && progress->cancelled()) {
-      cancelled = true;
-      return;
-    }
-    const tbb::blocked_range<size_t> range(chunk * kChunk, std::min(items.size(), (chunk + 1) * kChunk));
-    std::vector<Contribution>& out = chunks[chunk];
-    for (size_t w = range.begin(); w != range.end(); ++w) {
-      const WorkItem& item = items[w];
-      const UVec3& tv = scene.triangles[item.triangle];
-      const DVec3 tri[3] = {indexPos(tv.x), indexPos(tv.y), indexPos(tv.z)};
-      if (item.lo[0] == item.hi[0] && item.lo[1] == item.hi[1] && item.lo[2] == item.hi[2]) {
-        if (onlyBricks && !listed(item.lo[0], item.lo[1], item.lo[2])) continue;
-        // Inside one voxel (most of a fine mesh's triangles at the default level): the overlap
-        // test passes and clipping keeps all three vertices, so the clipped area is the
-        // triangle's own, the same formula on the same vertices (bit-identical, measured: the
-        // same field on the dragon), without the 13 axis tests and 6 clipping passes.
-        const double area = 0.5 * glm::length(glm::cross(tri[1] - tri[0], tri[2] - tri[0]));
-        if (area > 0.0)
-          out.push_back({packKey(uint32_t(item.lo[0]), uint32_t(item.lo[1]), uint32_t(item.lo[2])), float(area),
-                         item.triangle});
-        continue;
-      }
-      for (int32_t i = item.lo[0]; i <= item.hi[0]; ++i)
-        for (int32_t j = item.lo[1]; j <= item.hi[1]; ++j)
-          for (int32_t k = item.lo[2]; k <= item.hi[2]; ++k) {
-            if (onlyBricks && !listed(i, j, k)) continue;
-            const DVec3 lo(i, j, k);
-            if (!triangleBoxOverlap(lo + DVec3(0.5), 0.5, tri)) continue;
-            const double area = clippedTriangleArea(tri, lo);
-            // Touching (zero-area) overlaps hold no surface: the voxel stays inactive.
-            if (!(area > 0.0)) continue;
-            out.push_back({packKey(uint32_t(i), uint32_t(j), uint32_t(k)), float(area), item.triangle});
-          }
-    }
-    if (progress) progress->advance(range.size());
-  });
-  if (cancelled) throw CancelledError();
-
-  // Concatenated in chunk order: by triangle.
-  std::vector<Contribution> all;
+  // Slabs of whole superbrick columns along x (the key's leading coordinate, so each slab's
+  // voxels follow the previous slab's in key order), cut where the overlaps the items' voxel
+  // boxes could hold (spread evenly over each box's x range) pass kRegionContributions.
+  const int32_t superSide = int32_t(1) << kSuperLog2;
+  const int32_t columns = std::max<int32_t>(1, (int32_t(resolution) + superSide - 1) / superSide);
+  std::vector<double> perColumn(size_t(columns) + 1, 0.0);
   {
-    size_t total = 0;
-    for (const auto& v : chunks) total += v.size();
-    all.reserve(total);
-    for (auto& v : chunks) {
-      all.insert(all.end(), v.begin(), v.end());
-      std::vector<Contribution>().swap(v);
+    std::vector<double> rate(size_t(resolution) + 1, 0.0);  // difference array over voxel x
+    for (const WorkItem& item : items) {
+      const double volume = double(item.hi[0] - item.lo[0] + 1) * double(item.hi[1] - item.lo[1] + 1) *
+                            double(item.hi[2] - item.lo[2] + 1);
+      const double r = volume / double(item.hi[0] - item.lo[0] + 1);
+      rate[size_t(item.lo[0])] += r;
+      rate[size_t(item.hi[0]) + 1] -= r;
+    }
+    double running = 0.0;
+    for (int32_t x = 0; x < int32_t(resolution); ++x) {
+      running += rate[size_t(x)];
+      perColumn[size_t(x / superSide)] += running;
     }
   }
-  // Sorted by (key, triangle): a stable LSD radix sort on the key alone keeps the triangle order
-  // within each key. Keys are compacted to the level's bits first (brick coordinates of
-  // log2(resolution) - 2 bits, then the bit in the brick), which orders them as the packed key
-  // does: 2 passes of 11 bits at level 6, 3 at level 10. (std::sort on (key, triangle) was 8%
-  // of a dragon render at level 6, more than the voxelization itself.)
+  std::vector<int32_t> cuts{0};  // voxel x where each slab begins
   {
-    const int brickBits = std::max(0, int(std::log2(double(resolution)) + 0.5) - kBrickLog2);
-    const auto compact = [&](uint64_t key) {
-      uint32_t bi, bj, bk;
-      unpackBrick(key >> 6, bi, bj, bk);
-      return ((((uint64_t(bi) << brickBits) | bj) << brickBits | bk) << 6) | (key & 63u);
-    };
-    const int bits = 3 * brickBits + 6;
-    constexpr int kDigit = 11;
-    std::vector<uint64_t> keys(all.size()), keysTmp(all.size());
-    for (size_t a = 0; a < all.size(); ++a) keys[a] = compact(all[a].key);
-    std::vector<Contribution> tmp(all.size());
-    std::vector<size_t> count(size_t(1) << kDigit);
-    for (int shift = 0; shift < bits; shift += kDigit) {
-      std::fill(count.begin(), count.end(), size_t(0));
-      const uint64_t mask = (uint64_t(1) << kDigit) - 1;
-      for (uint64_t k : keys) ++count[(k >> shift) & mask];
-      size_t sum = 0;
-      for (size_t& c : count) {
-        const size_t n = c;
-        c = sum;
-        sum += n;
+    double sum = 0.0;
+    for (int32_t c = 0; c < columns; ++c) {
+      if (sum > 0.0 && sum + perColumn[size_t(c)] > double(kRegionContributions)) {
+        cuts.push_back(c * superSide);
+        sum = 0.0;
       }
-      for (size_t a = 0; a < all.size(); ++a) {
-        const size_t at = count[(keys[a] >> shift) & mask]++;
-        tmp[at] = all[a];
-        keysTmp[at] = keys[a];
-      }
-      all.swap(tmp);
-      keys.swap(keysTmp);
+      sum += perColumn[size_t(c)];
     }
+    cuts.push_back(std::max(int32_t(resolution), columns * superSide));
+  }
+  const size_t regions = cuts.size() - 1;
+  // Each slab's items, in item (triangle) order, their x range cut to the slab.
+  std::vector<std::vector<WorkItem>> regionItems(regions);
+  {
+    auto regionOf = [&](int32_t x) { return size_t(std::upper_bound(cuts.begin(), cuts.end(), x) - cuts.begin()) - 1; };
+    for (const WorkItem& item : items)
+      for (size_t r = regionOf(item.lo[0]); r < regions && cuts[r] <= item.hi[0]; ++r) {
+        WorkItem cut = item;
+        cut.lo[0] = std::max(item.lo[0], cuts[r]);
+        cut.hi[0] = std::min(item.hi[0], cuts[r + 1] - 1);
+        regionItems[r].push_back(cut);
+      }
+    std::vector<WorkItem>().swap(items);
   }
 
-  // Geometric normal and diffuse albedo per triangle are looked up, not stored per record.
+  if (progress) progress->start("voxelize", itemCount);
+  // Geometric normal per triangle, looked up, not stored per record.
   auto triNormal = [&](uint32_t t) {
     const UVec3& tv = scene.triangles[t];
     const DVec3 p0(scene.positions[tv.x]), p1(scene.positions[tv.y]), p2(scene.positions[tv.z]);
@@ -293,45 +249,143 @@ VoxelArrays voxelizeTriangles(const Scene& scene, const DVec3& origin, double vo
     const double len = glm::length(n);
     return len > 0.0 ? n / len : DVec3(0.0, 0.0, 1.0);
   };
+  // Keys compacted to the level's bits for the radix sort (superbrick coordinates of
+  // log2(resolution) - 4 bits, then the 12 bits of brick and voxel), ordered as the packed key.
+  const int superBits = std::max(0, int(std::log2(double(resolution)) + 0.5) - kSuperLog2);
+  const auto compact = [&](uint64_t key) {
+    uint32_t si, sj, sk;
+    unpackBrick(key >> 12, si, sj, sk);
+    return ((((uint64_t(si) << superBits) | sj) << superBits | sk) << 12) | (key & 4095u);
+  };
+  const int keyBits = 3 * superBits + 12;
 
-  // Reduce each voxel's run in (triangle) order; runs in parallel, each into its own slot.
-  std::vector<size_t> runStart;
-  for (size_t a = 0; a < all.size(); ++a)
-    if (a == 0 || all[a].key != all[a - 1].key) runStart.push_back(a);
-  runStart.push_back(all.size());
-  const size_t voxels = runStart.size() - 1;
+  std::atomic<bool> cancelled{false};
   VoxelArrays out;
-  out.keys.resize(voxels);
-  out.coverage.resize(voxels);
-  out.normal.resize(voxels);
-  out.albedo.resize(voxels);
-  tbb::parallel_for(size_t(0), voxels, [&](size_t r) {
-    const size_t a = runStart[r], end = runStart[r + 1];
-    double area = 0.0;
-    DVec3 normal(0.0), albedo(0.0);
-    // Surfaces are two-sided: each triangle's normal is flipped into the hemisphere of the
-    // voxel's first (lowest-index) triangle so that the two sides of a thin sheet add up
-    // instead of cancelling; the sign follows that triangle's winding.
-    const DVec3 reference = triNormal(all[a].triangle);
-    for (size_t b = a; b < end; ++b) {
-      const double w = all[b].areaVoxels;
-      const DVec3 n = b == a ? reference : triNormal(all[b].triangle);
-      area += w;
-      normal += (glm::dot(n, reference) < 0.0 ? -w : w) * n;
-      const Material& m = scene.materials[scene.triMaterial[all[b].triangle]];
-      // Specular-only surfaces add area (opacity) but no albedo: they gather no diffuse light.
-      if (m.isDiffuse()) albedo += w * DVec3(m.albedo);
+  for (size_t region = 0; region < regions; ++region) {
+    std::vector<WorkItem>& slab = regionItems[region];
+    // Every (voxel, triangle) overlap with its clipped area, per fixed chunk of work items, so
+    // that the chunks concatenated in order list them by triangle.
+    constexpr size_t kChunk = 1024;
+    std::vector<std::vector<Contribution>> chunks((slab.size() + kChunk - 1) / kChunk);
+    tbb::parallel_for(size_t(0), chunks.size(), [&](size_t chunk) {
+      if (cancelled.load(std::memory_order_relaxed)) return;
+      if (progress && progress->cancelled()) {
+        cancelled = true;
+        return;
+      }
+      const size_t begin = chunk * kChunk, end = std::min(slab.size(), (chunk + 1) * kChunk);
+      std::vector<Contribution>& local = chunks[chunk];
+      for (size_t w = begin; w != end; ++w) {
+        const WorkItem& item = slab[w];
+        const UVec3& tv = scene.triangles[item.triangle];
+        const DVec3 tri[3] = {indexPos(tv.x), indexPos(tv.y), indexPos(tv.z)};
+        if (item.single) {
+          if (onlyBricks && !listed(item.lo[0], item.lo[1], item.lo[2])) continue;
+          // Inside one voxel (most of a fine mesh's triangles at the default level): the overlap
+          // test passes and clipping keeps all three vertices, so the clipped area is the
+          // triangle's own, the same formula on the same vertices (bit-identical, measured: the
+          // same field on the dragon), without the 13 axis tests and 6 clipping passes.
+          const double area = 0.5 * glm::length(glm::cross(tri[1] - tri[0], tri[2] - tri[0]));
+          if (area > 0.0)
+            local.push_back({packKey(uint32_t(item.lo[0]), uint32_t(item.lo[1]), uint32_t(item.lo[2])), float(area),
+                             item.triangle});
+          continue;
+        }
+        for (int32_t i = item.lo[0]; i <= item.hi[0]; ++i)
+          for (int32_t j = item.lo[1]; j <= item.hi[1]; ++j)
+            for (int32_t k = item.lo[2]; k <= item.hi[2]; ++k) {
+              if (onlyBricks && !listed(i, j, k)) continue;
+              const DVec3 lo(i, j, k);
+              if (!triangleBoxOverlap(lo + DVec3(0.5), 0.5, tri)) continue;
+              const double area = clippedTriangleArea(tri, lo);
+              // Touching (zero-area) overlaps hold no surface: the voxel stays inactive.
+              if (!(area > 0.0)) continue;
+              local.push_back({packKey(uint32_t(i), uint32_t(j), uint32_t(k)), float(area), item.triangle});
+            }
+      }
+      if (progress) progress->advance(end - begin);
+    });
+    if (cancelled) throw CancelledError();
+    std::vector<WorkItem>().swap(slab);
+
+    // Concatenated in chunk order: by triangle.
+    std::vector<Contribution> all;
+    {
+      size_t total = 0;
+      for (const auto& v : chunks) total += v.size();
+      all.reserve(total);
+      for (auto& v : chunks) {
+        all.insert(all.end(), v.begin(), v.end());
+        std::vector<Contribution>().swap(v);
+      }
     }
-    const double len = glm::length(normal);
-    out.keys[r] = all[a].key;
-    out.coverage[r] = float(area);
-    out.normal[r] = Vec3(len > 0.0 ? normal / len : reference);
-    // Mean over all the voxel's surface (specular parts count as black), so that
-    // radiance = albedo / pi * flux / totalArea equals the diffuse part's radiance times its share.
-    out.albedo[r] = Vec3(albedo / area);
-  });
+    // Sorted by (key, triangle): a stable LSD radix sort on the compacted key alone keeps the
+    // triangle order within each key (std::sort on (key, triangle) was 8% of a dragon render
+    // at level 6, more than the voxelization itself).
+    {
+      constexpr int kDigit = 11;
+      std::vector<uint64_t> keys(all.size()), keysTmp(all.size());
+      for (size_t a = 0; a < all.size(); ++a) keys[a] = compact(all[a].key);
+      std::vector<Contribution> tmp(all.size());
+      std::vector<size_t> count(size_t(1) << kDigit);
+      for (int shift = 0; shift < keyBits; shift += kDigit) {
+        std::fill(count.begin(), count.end(), size_t(0));
+        const uint64_t mask = (uint64_t(1) << kDigit) - 1;
+        for (uint64_t k : keys) ++count[(k >> shift) & mask];
+        size_t sum = 0;
+        for (size_t& c : count) {
+          const size_t n = c;
+          c = sum;
+          sum += n;
+        }
+        for (size_t a = 0; a < all.size(); ++a) {
+          const size_t at = count[(keys[a] >> shift) & mask]++;
+          tmp[at] = all[a];
+          keysTmp[at] = keys[a];
+        }
+        all.swap(tmp);
+        keys.swap(keysTmp);
+      }
+    }
+
+    // Reduce each voxel's run in (triangle) order; runs in parallel, each into its own slot.
+    std::vector<size_t> runStart;
+    for (size_t a = 0; a < all.size(); ++a)
+      if (a == 0 || all[a].key != all[a - 1].key) runStart.push_back(a);
+    runStart.push_back(all.size());
+    const size_t voxels = runStart.size() - 1;
+    out.clear();
+    out.keys.resize(voxels);
+    out.coverage.resize(voxels);
+    out.normal.resize(voxels);
+    out.diffuse.resize(voxels);
+    tbb::parallel_for(size_t(0), voxels, [&](size_t r) {
+      const size_t a = runStart[r], end = runStart[r + 1];
+      double area = 0.0, diffuseArea = 0.0;
+      DVec3 normal(0.0);
+      // Surfaces are two-sided: each triangle's normal is flipped into the hemisphere of the
+      // voxel's first (lowest-index) triangle so that the two sides of a thin sheet add up
+      // instead of cancelling; the sign follows that triangle's winding.
+      const DVec3 reference = triNormal(all[a].triangle);
+      for (size_t b = a; b < end; ++b) {
+        const double w = all[b].areaVoxels;
+        const DVec3 n = b == a ? reference : triNormal(all[b].triangle);
+        area += w;
+        normal += (glm::dot(n, reference) < 0.0 ? -w : w) * n;
+        // Specular-only surfaces add area (opacity) but gather no diffuse light.
+        if (scene.materials[scene.triMaterial[all[b].triangle]].isDiffuse()) diffuseArea += w;
+      }
+      const double len = glm::length(normal);
+      out.keys[r] = all[a].key;
+      out.coverage[r] = float(area);
+      out.normal[r] = Vec3(len > 0.0 ? normal / len : reference);
+      out.diffuse[r] = float(diffuseArea / area);
+    });
+    std::vector<Contribution>().swap(all);
+    sink(out);
+  }
   if (progress) progress->finish();
-  return out;
+  return regions;
 }
 
 }  // namespace voxcone::voxel

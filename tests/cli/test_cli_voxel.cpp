@@ -44,7 +44,7 @@ TEST_F(CliVoxel, VoxelizePrintsJsonTableAndWritesVdb) {
     EXPECT_EQ(std::system(("vdb_print " + path("g.vdb") + " > " + path("print.txt")).c_str()), 0);
     std::ifstream p(path("print.txt"));
     const std::string text((std::istreambuf_iterator<char>(p)), std::istreambuf_iterator<char>());
-    EXPECT_NE(text.find("opacity_L6"), std::string::npos) << text;
+    EXPECT_NE(text.find("coverage_L6"), std::string::npos) << text;
     EXPECT_NE(text.find("radiance_L3"), std::string::npos) << text;
   }
 }

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <random>
 #include <sstream>
@@ -45,8 +46,11 @@ std::string quadJson(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d)
   return s.str();
 }
 
-/// A scene of the given shapes, their material "white" Lambertian albedo 0.6 (exactly 153/255
-/// in 8 bits), or `white` as given.
+/// The albedo of shapesScene's "white", which the tests' photons carry (Photon::albedo).
+constexpr float kWhite = 0.6f;
+
+/// A scene of the given shapes, their material "white" Lambertian albedo kWhite, or `white` as
+/// given.
 Scene shapesScene(const std::vector<std::string>& shapes,
                   const std::string& white = R"({"type": "lambertian", "albedo": 0.6})") {
   std::string list;
@@ -63,7 +67,8 @@ Scene shapesScene(const std::vector<std::string>& shapes,
 /// The unit square z = z0, facing +z.
 std::string planeAt(float z0) { return quadJson({0, 0, z0}, {1, 0, z0}, {1, 1, z0}, {0, 1, z0}); }
 
-/// `n` photons uniform on the unit square at height z, normal +z, each of power `power`.
+/// `n` photons uniform on the unit square at height z, normal +z, each of power `power`, landed
+/// on kWhite.
 std::vector<Photon> photonsOnPlane(size_t n, float z, const Vec3& power, uint32_t seed, float nz = 1.0f) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
@@ -71,6 +76,7 @@ std::vector<Photon> photonsOnPlane(size_t n, float z, const Vec3& power, uint32_
   for (Photon& p : out) {
     p.position = Vec3(u(rng), u(rng), z);
     p.power = power;
+    p.albedo = Vec3(kWhite);
     p.normal = Vec3(0.0f, 0.0f, nz);
     p.incident = p.normal;
   }
@@ -199,6 +205,7 @@ TEST(VoxelMips, PreserveOpacityWeightedRadiance) {
     ph.position = Vec3(t, u(rng), 0.1f + 0.8f * t);
     ph.normal = glm::normalize(Vec3(-0.8f, 0.0f, 1.0f));
     ph.power = Vec3(1e-4f);
+    ph.albedo = Vec3(kWhite);
     maps.global.push_back(ph);
   }
   field.inject(maps);
@@ -427,12 +434,12 @@ TEST_F(VoxelWrite, VdbOpensWithGridsAndMetadata) {
   std::vector<std::string> names;
   for (auto it = vdb.beginName(); it != vdb.endName(); ++it) names.push_back(it.gridName());
   for (int l = 3; l <= 5; ++l)
-    for (const char* g : {"opacity_L", "normal_L", "radiance_L"})
+    for (const char* g : {"coverage_L", "normal_L", "radiance_L", "radiance_back_L"})
       EXPECT_NE(std::find(names.begin(), names.end(), g + std::to_string(l)), names.end()) << g << l;
-  // Albedo only at the finest level.
-  EXPECT_NE(std::find(names.begin(), names.end(), "albedo_L5"), names.end());
-  EXPECT_EQ(names.size(), 10u);
-  auto opacity = openvdb::gridPtrCast<openvdb::FloatGrid>(vdb.readGrid("opacity_L5"));
+  // The diffuse fraction at the finest level, the axis fractions in the mips.
+  for (const char* g : {"diffuse_L5", "axes_L4", "axes_L3"}) EXPECT_NE(std::find(names.begin(), names.end(), g), names.end()) << g;
+  EXPECT_EQ(names.size(), 15u);
+  auto opacity = openvdb::gridPtrCast<openvdb::FloatGrid>(vdb.readGrid("coverage_L5"));
   ASSERT_TRUE(opacity);
   EXPECT_EQ(opacity->activeVoxelCount(), field.activeVoxels(5));
   // Index (i, j, k) sits at the voxel centre in world space.
@@ -445,12 +452,150 @@ TEST_F(VoxelWrite, VdbOpensWithGridsAndMetadata) {
   EXPECT_NEAR(meta->metaValue<double>("voxel_size"), field.voxelSize(5), 1e-12);
   EXPECT_EQ(meta->metaValue<std::string>("voxcone:scene"), "planes");
   EXPECT_EQ(meta->metaValue<std::string>("voxcone:photons"), "1000");
+
+  // Only the lit side is stored: nothing lit the planes' backs, and the upper plane (z = 0.3)
+  // took no photon.
+  auto back = openvdb::gridPtrCast<openvdb::Vec3SGrid>(vdb.readGrid("radiance_back_L5"));
+  auto front = openvdb::gridPtrCast<openvdb::Vec3SGrid>(vdb.readGrid("radiance_L5"));
+  EXPECT_EQ(back->activeVoxelCount(), 0u);
+  EXPECT_EQ(front->activeVoxelCount(), 32u * 32u);
   vdb.close();
 
   // A missing directory: an error and no file.
   const std::string bad = path("missing/field.vdb");
   EXPECT_THROW(field.write(bad, nlohmann::json::object()), Error);
   EXPECT_FALSE(std::filesystem::exists(m_dir / "missing"));
+}
+
+/// Photons on random triangles (uniform per triangle), normal = geometric normal.
+std::vector<Photon> photonsOnScene(const Scene& scene, size_t n) {
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<size_t> tri(0, scene.triangleCount() - 1);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Photon> out(n);
+  for (Photon& p : out) {
+    const UVec3& t = scene.triangles[tri(rng)];
+    float a = u(rng), b = u(rng);
+    if (a + b > 1.0f) a = 1.0f - a, b = 1.0f - b;
+    const Vec3 p0 = scene.positions[t.x], p1 = scene.positions[t.y], p2 = scene.positions[t.z];
+    p.position = p0 + a * (p1 - p0) + b * (p2 - p0);
+    p.normal = glm::normalize(glm::cross(p1 - p0, p2 - p0));
+    p.power = Vec3(1.0f / float(n));
+    p.albedo = Vec3(0.5f);
+  }
+  return out;
+}
+
+/// Every voxel of every level of `a` and `b` at its centre, and cone lookups between them,
+/// compared for exact equality; `compared` counts the voxels compared.
+void expectSameField(const VoxelField& a, const VoxelField& b, uint64_t& compared) {
+  EXPECT_EQ(a.levels(), b.levels());
+  EXPECT_EQ(a.injectedPower(), b.injectedPower());
+  EXPECT_EQ(a.droppedPower(), b.droppedPower());
+  EXPECT_EQ(a.surfaceArea(), b.surfaceArea());
+  compared = 0;
+  for (int level : a.levels()) {
+    EXPECT_EQ(a.activeVoxels(level), b.activeVoxels(level)) << level;
+    const double vs = a.voxelSize(level);
+    const int res = 1 << level;
+    const Vec3 lo = a.bounds().lo;
+    for (int i = 0; i < res; ++i)
+      for (int j = 0; j < res; ++j)
+        for (int k = 0; k < res; ++k) {
+          const Vec3 p = lo + Vec3(float((i + 0.5) * vs), float((j + 0.5) * vs), float((k + 0.5) * vs));
+          const VoxelSample x = a.lookup(p, level), y = b.lookup(p, level);
+          if (x.opacity == 0.0f && y.opacity == 0.0f) continue;
+          ++compared;
+          ASSERT_EQ(x.opacity, y.opacity) << level << " " << i << " " << j << " " << k;
+          ASSERT_EQ(x.radiance, y.radiance) << level << " " << i << " " << j << " " << k;
+          ASSERT_EQ(x.normal, y.normal) << level << " " << i << " " << j << " " << k;
+          ASSERT_EQ(x.projected, y.projected) << level << " " << i << " " << j << " " << k;
+        }
+  }
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const Vec3 lo = a.bounds().lo, ext = a.bounds().hi - a.bounds().lo;
+  for (int n = 0; n < 4000; ++n) {
+    const Vec3 p = lo + ext * Vec3(u(rng), u(rng), u(rng)), apex = lo + ext * Vec3(u(rng), u(rng), u(rng));
+    const Vec3 d = glm::normalize(p - apex + Vec3(1e-3f));
+    const float level = float(a.levels().back()) + u(rng) * float(a.levels().front() - a.levels().back());
+    const ConeSample x = a.coneSample(p, level, d, apex), y = b.coneSample(p, level, d, apex);
+    EXPECT_EQ(x.density, y.density);
+    EXPECT_EQ(x.radiance, y.radiance);
+    EXPECT_EQ(a.causticRadiance(p, apex), b.causticRadiance(p, apex));
+  }
+}
+
+TEST_F(VoxelWrite, ReadBackIsExact) {
+  // A sphere (normals in every direction), a floor lit from above, a panel lit from behind its
+  // winding (back radiance), half a mirror over the floor's corner (voxels part diffuse), a
+  // caustic grid; Gaussian mips.
+  const Scene scene = shapesScene(
+      {planeAt(0.0f), quadJson({0.2f, 0.2f, 0.6f}, {0.2f, 0.8f, 0.6f}, {0.8f, 0.8f, 0.6f}, {0.8f, 0.2f, 0.6f}),
+       R"({"type": "sphere", "center": [0.5, 0.5, 0.3], "radius": 0.17, "material": "white", "subdivisions": 4})",
+       R"({"type": "quad", "material": "mirror", "vertices": [[0, 0, 0], [0.3, 0, 0], [0.3, 0, 0.2], [0, 0, 0.2]]})"},
+      R"({"type": "lambertian", "albedo": 0.6}, "mirror": {"type": "mirror"})");
+  VoxelSettings settings;
+  settings.level = 6;
+  settings.coarsestLevel = 2;
+  settings.causticLevel = 7;
+  settings.mipFilter = MipFilter::Gaussian;
+  VoxelField field = VoxelField::voxelize(scene, settings);
+  PhotonMaps maps;
+  maps.global = photonsOnPlane(20000, 0.0f, Vec3(1e-4f, 2e-4f, 5e-5f), 31);
+  for (Photon& p : photonsOnPlane(5000, 0.6f, Vec3(1e-4f), 32, -1.0f)) {
+    p.position = Vec3(0.2f, 0.2f, 0.0f) + p.position * Vec3(0.6f, 0.6f, 1.0f);
+    maps.global.push_back(p);
+  }
+  for (const Photon& p : photonsOnScene(scene, 20000)) maps.global.push_back(p);
+  maps.caustic = photonsOnPlane(5000, 0.0f, Vec3(2e-4f), 33);
+  field.inject(maps);
+  field.buildMips();
+  const std::string file = path("field.vdb");
+  field.write(file, nlohmann::json::object());
+  const VoxelField back = VoxelField::read(file);
+  EXPECT_EQ(back.settings().level, 6);
+  EXPECT_EQ(back.settings().causticLevel, 7);
+  EXPECT_EQ(back.settings().mipFilter, MipFilter::Gaussian);
+  EXPECT_EQ(back.bounds().lo, field.bounds().lo);
+  uint64_t compared = 0;
+  expectSameField(field, back, compared);
+  EXPECT_GT(compared, 10000u);
+  EXPECT_NO_THROW(back.checkScene(scene, "test"));
+
+  // Injected again, the read field is the original injected again (the diffuse fractions and
+  // the geometry survive too); and written again, the same file content.
+  VoxelField again = VoxelField::read(file), original = VoxelField::read(file);
+  PhotonMaps other;
+  other.global = photonsOnScene(scene, 30000);
+  again.inject(other);
+  again.buildMips();
+  field.inject(other);
+  field.buildMips();
+  expectSameField(field, again, compared);
+  (void)original;
+
+  // Another scene (moved), a file that is not a field, a missing file: errors naming it.
+  const Scene moved = shapesScene({planeAt(0.1f)});
+  EXPECT_THROW(back.checkScene(moved, "test"), SettingsError);
+  const std::string junk = path("junk.vdb");
+  { std::ofstream(junk) << "not a vdb"; }
+  for (const std::string& bad : {junk, path("missing.vdb")}) {
+    try {
+      VoxelField::read(bad);
+      ADD_FAILURE() << bad;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+    }
+  }
+  // A plain OpenVDB file without voxcone's metadata.
+  const std::string plain = path("plain.vdb");
+  {
+    openvdb::initialize();
+    openvdb::io::File f(plain);
+    f.write(openvdb::GridPtrVec{openvdb::FloatGrid::create()});
+  }
+  EXPECT_THROW(VoxelField::read(plain), Error);
 }
 
 TEST(VoxelField, RejectsBadSettings) {
@@ -531,24 +676,6 @@ TEST(VoxelField, CausticGrid) {
 
 std::string dragonScenePath() { return test::sourceDir() + "/data/scenes/cornell-dragon.json"; }
 bool haveDragon() { return std::filesystem::exists(test::sourceDir() + "/data/models/dragon_vrip.ply"); }
-
-/// Photons on random triangles (uniform per triangle), normal = geometric normal.
-std::vector<Photon> photonsOnScene(const Scene& scene, size_t n) {
-  std::mt19937 rng(3);
-  std::uniform_int_distribution<size_t> tri(0, scene.triangleCount() - 1);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  std::vector<Photon> out(n);
-  for (Photon& p : out) {
-    const UVec3& t = scene.triangles[tri(rng)];
-    float a = u(rng), b = u(rng);
-    if (a + b > 1.0f) a = 1.0f - a, b = 1.0f - b;
-    const Vec3 p0 = scene.positions[t.x], p1 = scene.positions[t.y], p2 = scene.positions[t.z];
-    p.position = p0 + a * (p1 - p0) + b * (p2 - p0);
-    p.normal = glm::normalize(glm::cross(p1 - p0, p2 - p0));
-    p.power = Vec3(1.0f / float(n));
-  }
-  return out;
-}
 
 TEST(VoxelDragon, Level8Memory) {
   if (!haveDragon()) GTEST_SKIP() << "data/models/dragon_vrip.ply missing";

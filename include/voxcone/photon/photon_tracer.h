@@ -24,6 +24,9 @@ struct Photon {
   Vec3 power{0.0f};      ///< flux carried, W per RGB channel
   Vec3 incident{0.0f};   ///< unit direction towards where the photon came from (away from the surface)
   Vec3 normal{0.0f};     ///< unit shading normal, flipped to the side the photon arrived on
+  /// Diffuse reflectance of the surface it landed on: the voxel field injects the reflected
+  /// power (power * albedo), so it stores no albedo of its own.
+  Vec3 albedo{0.0f};
   /// Scattering events between the light and this hit, saturating at 255: 0 for a photon
   /// straight from a light (direct light, which photon mapping takes from shadow rays).
   uint8_t bounces = 0;

@@ -186,11 +186,23 @@ public:
   /// Bytes in memory of everything the field holds.
   uint64_t memoryBytes() const;
 
-  /// Write every grid and level into one .vdb file (standard OpenVDB grid types: FloatGrid
-  /// "opacity_L<level>", Vec3SGrid "normal_L<level>", "radiance_L<level>", "albedo_L<finest>",
-  /// "caustic_L<level>"), file metadata from `metadata` (top-level keys as strings named
-  /// "voxcone:<key>") plus level, voxel size and photon counts. Atomic. Throws Error.
+  /// Write every grid and level into one .vdb file, in standard OpenVDB grid types, voxel
+  /// (i, j, k) centred at index (i, j, k): per level L of the main grid FloatGrid
+  /// "coverage_L<L>" (surface area / voxel size^2 at the finest level, opacity = min(1,
+  /// coverage); opacity in the mips), Vec3SGrid "normal_L<L>" (unit), "radiance_L<L>" and
+  /// "radiance_back_L<L>" (each side's outgoing radiance, W/(sr m^2), where nonzero), the mips'
+  /// "axes_L<L>" and the finest level's "diffuse_L<L>" (where not 1); the caustic grid's the
+  /// same with the prefix "caustic_". File metadata: `metadata` (top-level keys as strings
+  /// named "voxcone:<key>") and what read() needs (levels, the cube, settings, photon counts,
+  /// field_version). Atomic. Throws Error.
   void write(const std::string& path, const nlohmann::json& metadata) const;
+  /// A field back from write()'s file: the same voxels and values, bit for bit (every stored
+  /// encoding survives its decoding: tests/voxel). Throws Error naming the file for a file that
+  /// is not a voxcone field of this version.
+  static VoxelField read(const std::string& path);
+  /// Throws SettingsError (naming `what`) unless the field covers the cube voxelize() would
+  /// give `scene` (a field of another scene, or of a moved one).
+  void checkScene(const Scene& scene, const std::string& what) const;
 
 private:
   struct Impl;
