@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 # Memory of the study we compare with, for the same dragon (MB).
 REFERENCE_MB = {8: 228.06, 9: 476.31, 10: 1469.22}
-GRIDS = ["topology", "opacity", "normal", "albedo", "radiance", "radiance_back"]
+GRIDS = ["topology", "opacity", "normal", "axes", "radiance", "radiance_back", "cone_table"]
 
 
 def series(study):
@@ -50,7 +50,7 @@ def main(argv):
         return 1
     fig, (ax_mem, ax_time) = plt.subplots(1, 2, figsize=(11, 4.2))
     ax_mem.plot(s["levels"], s["total_mb"], "o-", color="tab:blue", lw=2, label="voxcone: all grids + mips")
-    for g, style in zip(GRIDS, [":", "--", "-.", (0, (3, 1, 1, 1)), (0, (5, 2)), (0, (1, 2))]):
+    for g, style in zip(GRIDS, [":", "--", "-.", (0, (3, 1, 1, 1)), (0, (5, 2)), (0, (1, 2)), (0, (2, 1))]):
         ax_mem.plot(s["levels"], s[g + "_mb"], linestyle=style, lw=1, label=g)
     ax_mem.plot(s["levels"], s["peak_rss_mb"], "s-", color="tab:gray", lw=1, ms=4, label="voxcone: peak RSS")
     ax_mem.plot(s["reference_levels"], s["reference_mb"], "D--", color="tab:red", lw=1.5,

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <optional>
 #include <regex>
+#include <tuple>
 
 namespace voxcone {
 
@@ -40,6 +41,8 @@ struct RenderOptions {
   std::string sampler;
   double targetError = 0.0;
   double timeBudget = 0.0;
+  std::string field;              // --field: a .vdb to render with (voxcone)
+  double memoryBudgetMb = -1.0;   // --memory-budget-mb (voxcone); -1: not given
   bool quiet = false;
 };
 
@@ -102,6 +105,23 @@ void runRender(const RenderOptions& o) {
   } catch (const nlohmann::json::parse_error&) {
     throw SettingsError("--options is not valid JSON: " + o.integratorOptions);
   }
+  // --field and --memory-budget-mb are voxcone options (voxel_cone.h) with a flag of their own.
+  for (const auto& [flag, key, given] :
+       {std::tuple<const char*, const char*, bool>{"--field", "field", !o.field.empty()},
+        {"--memory-budget-mb", "memory_budget_mb", o.memoryBudgetMb >= 0.0}}) {
+    if (!given) continue;
+    if (settings.method != "voxcone") throw SettingsError(std::string(flag) + " is a voxcone option; --method is " + settings.method);
+    if (options.is_object() && options.contains(key))
+      throw SettingsError(std::string(flag) + " and --options' \"" + key + "\" both given");
+  }
+  if (!o.field.empty()) {
+    if (autoSettings)
+      throw SettingsError("--field renders with the field's photons; --target-error and --time-budget trace new photons "
+                          "for every pass");
+    if (!std::filesystem::is_regular_file(o.field)) throw SettingsError("--field: no such file: " + o.field);
+    options["field"] = o.field;
+  }
+  if (o.memoryBudgetMb >= 0.0) options["memory_budget_mb"] = o.memoryBudgetMb;
 
   // Output paths: <stem>.exr, <stem>.png, <stem>.json next to each other.
   std::filesystem::path out = o.output.empty()
@@ -270,6 +290,14 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--time-budget", o->timeBudget,
                   "voxcone: render averaged passes (of --spp, default 4) for this many seconds (load included)")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--field", o->field,
+                  "voxcone: render with this field (.vdb from 'voxcone voxelize -o') instead of tracing photons and "
+                  "voxelizing; its levels and photons are the field's")
+      ->check(nonEmpty());
+  cmd->add_option("--memory-budget-mb", o->memoryBudgetMb,
+                  "voxcone: refuse a voxel level whose estimated memory exceeds this many MB, before allocating (0: no "
+                  "budget; default: the machine's available memory)")
+      ->check(CLI::Range(0.0, 1e12));
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

@@ -1,6 +1,7 @@
-// `voxcone study memory SCENE --levels 6..11`: voxelize at every level in a child process (so
+// `voxcone study memory SCENE --levels 6..12`: voxelize at every level in a child process (so
 // that each row's peak RSS is its own), collect one row per level into CSV and JSON, and draw
-// the chart with tools/plot_memory.py.
+// the chart with tools/plot_memory.py. A level the memory budget refuses is a row with its
+// error, and the study goes on.
 
 #include "cli_util.h"
 #include "commands.h"
@@ -27,9 +28,10 @@ namespace {
 
 struct StudyOptions {
   std::string scenePath;
-  std::string levels = "6..11";
+  std::string levels = "6..12";
   std::string outDir = "out/study-memory";
-  uint64_t photons = 1000000;
+  uint64_t photons = 0;        // 0: the scene's (what voxelize and render use)
+  double memoryBudgetMb = -1;  // -1: voxelize's default (the available memory)
   int threads = 0;
   bool noChart = false;
   std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_memory.py";
@@ -46,9 +48,11 @@ void runStudyMemory(const StudyOptions& o) {
 
   nlohmann::json rows = nlohmann::json::array();
   for (int level = first; level <= last; ++level) {
-    const std::string cmd = "exec " + shellQuote(selfExe()) + " voxelize " + shellQuote(o.scenePath) + " --json -q --level " +
-                            std::to_string(level) + " --photons " + std::to_string(o.photons) + " -t " +
-                            std::to_string(o.threads) + " 2>&1";
+    std::string cmd = "exec " + shellQuote(selfExe()) + " voxelize " + shellQuote(o.scenePath) + " --json -q --level " +
+                      std::to_string(level) + " -t " + std::to_string(o.threads);
+    if (o.photons > 0) cmd += " --photons " + std::to_string(o.photons);
+    if (o.memoryBudgetMb >= 0.0) cmd += " --memory-budget-mb " + std::to_string(o.memoryBudgetMb);
+    cmd += " 2>&1";
     std::fprintf(stderr, "study memory: level %d ...\n", level);
     std::string out;
     const int code = runCapture(cmd, out);
@@ -81,40 +85,56 @@ void runStudyMemory(const StudyOptions& o) {
     row["inject_seconds"] = j["timings"]["inject_seconds"];
     row["mip_seconds"] = j["timings"]["mip_seconds"];
     row["photon_seconds"] = j["timings"]["photon_seconds"];
+    // What the target counts: photons, voxelize, inject and mips.
+    row["prepare_seconds"] = j["timings"]["photon_seconds"].get<double>() + j["timings"]["voxelize_seconds"].get<double>() +
+                             j["timings"]["inject_seconds"].get<double>() + j["timings"]["mip_seconds"].get<double>();
+    row["photons_stored"] = j["photons"]["stored_global"];
     row["peak_rss_bytes"] = j["peak_rss_bytes"];
+    row["peak_rss_bytes_after"] = j["peak_rss_bytes_after"];
+    row["estimate"] = j["estimate"];
     rows.push_back(row);
   }
 
-  const nlohmann::json study = {{"study", "memory"}, {"scene", o.scenePath}, {"photons", o.photons}, {"rows", rows}};
+  const nlohmann::json study = {{"study", "memory"},
+                                 {"scene", o.scenePath},
+                                 {"photons", o.photons > 0 ? nlohmann::json(o.photons) : nlohmann::json("scene")},
+                                 {"rows", rows}};
   const std::string jsonPath = o.outDir + "/memory.json", csvPath = o.outDir + "/memory.csv";
   writeJsonAtomic(jsonPath, study);
   writeFileAtomic(csvPath, [&](const std::string& tmp) {
     std::ofstream f(tmp);
-    f << "level,voxel_size,active_voxels,total_mb,topology_mb,opacity_mb,normal_mb,albedo_mb,radiance_mb,"
-         "voxelize_seconds,inject_seconds,mip_seconds,peak_rss_mb,error\n";
+    static const char* const grids[] = {"topology", "opacity", "normal", "axes", "diffuse", "radiance", "radiance_back",
+                                        "cone_table"};
+    f << "level,voxel_size,active_voxels,total_mb";
+    for (const char* g : grids) f << "," << g << "_mb";
+    f << ",estimate_mb,estimate_peak_mb,photon_seconds,voxelize_seconds,inject_seconds,mip_seconds,prepare_seconds,"
+         "peak_rss_mb,error\n";
     auto mb = [](const nlohmann::json& v) { return v.is_null() ? 0.0 : v.get<double>() / 1e6; };
     for (const auto& r : rows) {
       const nlohmann::json b = r.value("bytes", nlohmann::json::object());
+      const nlohmann::json e = r.value("estimate", nlohmann::json::object());
       f << r["level"] << "," << r.value("voxel_size", 0.0) << "," << r.value("active_voxels", 0) << ","
-        << mb(r.value("total_bytes", nlohmann::json())) << "," << mb(b.value("topology", nlohmann::json())) << ","
-        << mb(b.value("opacity", nlohmann::json())) << "," << mb(b.value("normal", nlohmann::json())) << ","
-        << mb(b.value("albedo", nlohmann::json())) << "," << mb(b.value("radiance", nlohmann::json())) << ","
-        << r.value("voxelize_seconds", 0.0) << "," << r.value("inject_seconds", 0.0) << "," << r.value("mip_seconds", 0.0)
-        << "," << mb(r.value("peak_rss_bytes", nlohmann::json())) << "," << r.value("error", "") << "\n";
+        << mb(r.value("total_bytes", nlohmann::json()));
+      for (const char* g : grids) f << "," << mb(b.value(g, nlohmann::json()));
+      f << "," << mb(e.value("field_bytes", nlohmann::json())) << "," << mb(e.value("peak_bytes", nlohmann::json())) << ","
+        << r.value("photon_seconds", 0.0) << "," << r.value("voxelize_seconds", 0.0) << "," << r.value("inject_seconds", 0.0)
+        << "," << r.value("mip_seconds", 0.0) << "," << r.value("prepare_seconds", 0.0) << ","
+        << mb(r.value("peak_rss_bytes", nlohmann::json())) << ",\"" << r.value("error", "") << "\"\n";
     }
     if (!f) throw Error("cannot write " + tmp);
   });
-  std::printf("%5s %10s %12s %10s %10s %10s %10s\n", "level", "voxel", "active", "total MB", "voxelize s", "inject s",
-              "peak MB");
+  std::printf("%5s %10s %12s %10s %11s %10s %10s %10s %9s %10s\n", "level", "voxel", "active", "total MB", "estimate MB",
+              "voxelize s", "inject s", "mips s", "prepare s", "peak MB");
   for (const auto& r : rows) {
     if (r.contains("error")) {
       std::printf("%5d failed: %s\n", r["level"].get<int>(), r["error"].get<std::string>().c_str());
       continue;
     }
-    std::printf("%5d %10.4g %12llu %10.2f %10.3f %10.3f %10.1f\n", r["level"].get<int>(), r["voxel_size"].get<double>(),
-                (unsigned long long)r["active_voxels"].get<uint64_t>(), r["total_bytes"].get<double>() / 1e6,
-                r["voxelize_seconds"].get<double>(), r["inject_seconds"].get<double>(),
-                r["peak_rss_bytes"].get<double>() / 1e6);
+    std::printf("%5d %10.4g %12llu %10.2f %11.2f %10.3f %10.3f %10.3f %9.3f %10.1f\n", r["level"].get<int>(),
+                r["voxel_size"].get<double>(), (unsigned long long)r["active_voxels"].get<uint64_t>(),
+                r["total_bytes"].get<double>() / 1e6, r["estimate"]["field_bytes"].get<double>() / 1e6,
+                r["voxelize_seconds"].get<double>(), r["inject_seconds"].get<double>(), r["mip_seconds"].get<double>(),
+                r["prepare_seconds"].get<double>(), r["peak_rss_bytes"].get<double>() / 1e6);
   }
   std::printf("wrote %s, %s\n", csvPath.c_str(), jsonPath.c_str());
   if (!o.noChart) runChartScript(o.plotScript, jsonPath, o.outDir + "/memory");
@@ -349,9 +369,13 @@ void addStudyCommand(CLI::App& app) {
   auto o = std::make_shared<StudyOptions>();
   CLI::App* mem = study->add_subcommand("memory", "Voxel memory and time against level (CSV, JSON, PNG and SVG chart)");
   mem->add_option("scene", o->scenePath, "Scene file (JSON)")->required();
-  mem->add_option("--levels", o->levels, "Levels FIRST..LAST (default 6..11)");
+  mem->add_option("--levels", o->levels, "Levels FIRST..LAST (default 6..12)");
   mem->add_option("-o,--output", o->outDir, "Output folder (default out/study-memory)");
-  mem->add_option("--photons", o->photons, "Photons per level");
+  mem->add_option("--photons", o->photons, "Photons per level (default: the scene's, as voxelize and render use)");
+  mem->add_option("--memory-budget-mb", o->memoryBudgetMb,
+                  "Budget per level, MB (0: none; default: voxelize's, the available memory): a level over it is "
+                  "refused and recorded")
+      ->check(CLI::Range(0.0, 1e12));
   mem->add_option("-t,--threads", o->threads, "Threads per level (0 = all)")->check(CLI::Range(0, 4096));
   mem->add_option("--plot-script", o->plotScript, "Chart script (python3-matplotlib)");
   mem->add_flag("--no-chart", o->noChart, "Write CSV and JSON only");

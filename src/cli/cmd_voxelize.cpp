@@ -31,6 +31,7 @@ struct VoxelizeOptions {
   int threads = 0;
   bool json = false;
   bool quiet = false;
+  double memoryBudgetMb = -1.0;  // -1: the available memory; 0: no budget
 };
 
 void runVoxelize(const VoxelizeOptions& o) {
@@ -75,6 +76,9 @@ void runVoxelize(const VoxelizeOptions& o) {
   vs.level = o.level;
   vs.coarsestLevel = o.coarsest;
   vs.causticLevel = causticLevel;
+  vs.memoryBudgetBytes = VoxelSettings::budgetFromMegabytes(o.memoryBudgetMb);
+  // The estimate the budget is checked against, beside what the field turns out to take.
+  const std::vector<FieldEstimate> estimates = VoxelField::estimate(scene, vs);
   t.reset();
   VoxelField field = VoxelField::voxelize(scene, vs, &progress);
   const double voxelizeSec = t.seconds();
@@ -103,6 +107,9 @@ void runVoxelize(const VoxelizeOptions& o) {
     rows.push_back({{"grid", g.grid}, {"level", g.level}, {"voxel_size", g.voxelSize}, {"active_voxels", g.activeVoxels},
                     {"leaves", g.leaves}, {"bytes", g.bytes}, {"seconds", g.seconds}});
   j["grids"] = rows;
+  const FieldEstimate& est = estimates.back();
+  j["estimate"] = {{"voxels", est.voxels}, {"field_bytes", est.fieldBytes}, {"peak_bytes", est.peakBytes},
+                   {"probe_level", est.probeLevel}};
   j["total_bytes"] = field.memoryBytes();
 
   if (!o.output.empty()) {
@@ -151,6 +158,10 @@ void addVoxelizeCommand(CLI::App& app) {
   cmd->add_option("--seed", o->seed, "Random seed");
   cmd->add_option("-o,--output", o->output, "Write all grids and levels to this .vdb file");
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
+  cmd->add_option("--memory-budget-mb", o->memoryBudgetMb,
+                  "Refuse a level whose estimated memory exceeds this many MB, before allocating (0: no budget; "
+                  "default: the machine's available memory)")
+      ->check(CLI::Range(0.0, 1e12));
   cmd->add_flag("--json", o->json, "Print the table as JSON on stdout");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runVoxelize(*o); });

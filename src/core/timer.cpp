@@ -23,4 +23,15 @@ uint64_t currentRssBytes() {
   return static_cast<uint64_t>(resident) * static_cast<uint64_t>(sysconf(_SC_PAGESIZE));
 }
 
+uint64_t availableMemoryBytes() {
+  FILE* f = std::fopen("/proc/meminfo", "r");
+  if (!f) return 0;
+  char line[256];
+  unsigned long long kb = 0;
+  bool found = false;
+  while (!found && std::fgets(line, sizeof line, f)) found = std::sscanf(line, "MemAvailable: %llu kB", &kb) == 1;
+  std::fclose(f);
+  return found ? static_cast<uint64_t>(kb) * 1024u : 0;
+}
+
 }  // namespace voxcone

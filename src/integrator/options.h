@@ -40,6 +40,15 @@ public:
                           std::to_string(lo) + ", " + std::to_string(hi) + "]");
     return d;
   }
+  /// A string (`def` when absent).
+  std::string text(const std::string& key, const std::string& def) {
+    if (!m_options.contains(key)) return def;
+    m_used.insert(key);
+    const auto& v = m_options.at(key);
+    if (!v.is_string()) throw SettingsError(m_integrator + "." + key + ": expected a string");
+    return v.get<std::string>();
+  }
+  bool has(const std::string& key) const { return m_options.contains(key); }
   /// One of `choices` (the first is the default).
   std::string choice(const std::string& key, const std::vector<std::string>& choices) {
     if (!m_options.contains(key)) return choices.front();

@@ -57,6 +57,8 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <cmath>
 #include <functional>
@@ -700,6 +702,7 @@ struct VoxelField::Impl {
   double surfaceArea = 0.0;   ///< world units^2, full precision sum at voxelization
   DVec3 injected{0.0}, dropped{0.0};
   uint64_t globalPhotons = 0, causticPhotons = 0;
+  uint64_t sceneHash = 0;     ///< fieldSceneHash of the scene voxelized
 
   double voxelSize(int level) const { return extent / double(uint64_t(1) << level); }
   void inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut);
@@ -920,8 +923,120 @@ void fieldCube(const Scene& scene, double padding, DVec3& origin, double& extent
 }
 }  // namespace
 
+namespace {
+
+/// The bytes a level of `voxels` voxels in `bricks` bricks takes (Level's layout, every voxel's
+/// front lit, no back; the mips' axes and cone tables; the flat brick table up to level 8).
+double levelBytes(int level, double voxels, double bricks, bool finest) {
+  double bytes = voxels * (2.0 + 2.0 + 4.0)        // coverage, normal, front radiance
+                 + bricks * (8.0 + 4.0 + 2 * 4.0)  // mask, base, the two sides' sparse bases
+                 + bricks / 8.0 * 12.0;            // superbricks (a surface's fill a half of one's bricks)
+  if (finest) bytes += bricks * 4.0;               // the diffuse fraction's sparse base
+  else bytes += voxels * 3.0;                      // axes
+  if (level <= kConeTableLevel) bytes += voxels * double(sizeof(ConeVoxel));
+  if (level <= kDenseBrickLevel) bytes += std::pow(double(uint64_t(1) << level) / 4.0, 3.0) * 4.0;
+  return bytes;
+}
+
+std::string megabytes(uint64_t bytes) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.0f MB", double(bytes) / 1e6);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<FieldEstimate> VoxelField::estimate(const Scene& scene, const VoxelSettings& settings, bool quick,
+                                                uint64_t budget) {
+  DVec3 origin;
+  double extent;
+  fieldCube(scene, settings.padding, origin, extent);
+  const int top = settings.level;
+  // Per finest level m: its voxels V(m) and voxels per brick, from a count at level `probe`
+  // (exact), growing by sqrt(voxels per brick) per level (4 on a surface: a brick of level
+  // m + 2 is a voxel of level m).
+  auto rowsFrom = [&](int probe, double voxels, double fill) {
+    const double growth = std::sqrt(std::max(1.0, fill));
+    std::vector<FieldEstimate> rows;
+    for (int finest = settings.coarsestLevel; finest <= top; ++finest) {
+      FieldEstimate e;
+      e.level = finest;
+      e.probeLevel = probe;
+      double field = 0.0, finestVoxels = 0.0;
+      for (int m = settings.coarsestLevel; m <= finest; ++m) {
+        const double v = std::max(1.0, voxels * std::pow(growth, double(m - std::max(probe, 1))));
+        if (m == finest) finestVoxels = v;
+        field += levelBytes(m, v, std::max(1.0, v / std::max(1.0, fill)), m == finest);
+      }
+      e.voxels = uint64_t(finestVoxels);
+      e.fieldBytes = uint64_t(field);
+      // Held at once besides the field: one slab of voxelizeTriangles (48 bytes per overlap),
+      // its work items (28 bytes per triangle, twice while they are cut into slabs), the
+      // builder's arrays growing (coverage and normal copied as they double), injection's flux
+      // (12 bytes per lit voxel).
+      // A slab holds at most kRegionContributions overlaps, and about 3 per voxel (measured on
+      // the dragon at level 10: 1.6 overlaps per voxel).
+      const double slab = std::min(double(voxel::kRegionContributions), 3.0 * finestVoxels);
+      const double transient = slab * 48.0 + 56.0 * double(scene.triangleCount()) + finestVoxels * (4.0 + 12.0);
+      e.peakBytes = uint64_t(field + transient);
+      rows.push_back(e);
+    }
+    return rows;
+  };
+  if (quick) {
+    // The triangles' voxel boxes bound the finest level's voxels from above.
+    const double bound = double(voxel::voxelBoxBound(scene, origin, extent / double(uint64_t(1) << top), uint32_t(1) << top));
+    std::vector<FieldEstimate> rows = rowsFrom(top, bound, 16.0);
+    for (FieldEstimate& r : rows) r.probeLevel = 0;
+    if (rows.back().peakBytes <= budget) return rows;
+  }
+  const int probe = std::max(1, std::min(top - 2, 9));
+  const double vs = extent / double(uint64_t(1) << probe);
+  uint64_t voxels = 0, bricks = 0, lastBrick = ~uint64_t(0);
+  voxel::voxelizeTriangles(scene, origin, vs, uint32_t(1) << probe, nullptr, [&](voxel::VoxelArrays& run) {
+    voxels += run.size();
+    for (uint64_t key : run.keys)
+      if ((key >> 6) != lastBrick) {
+        ++bricks;
+        lastBrick = key >> 6;
+      }
+  });
+  return rowsFrom(probe, double(voxels), double(voxels) / double(std::max<uint64_t>(1, bricks)));
+}
+
+namespace {
+/// FNV-1a over what a field's content depends on: geometry (positions, smooth normals,
+/// triangles, their materials), the materials' optical values and the point lights; not the
+/// camera or the render settings, so one field serves many views.
+uint64_t fieldSceneHash(const Scene& scene) {
+  uint64_t h = 1469598103934665603ull;
+  auto bytes = [&](const void* data, size_t n) {
+    const unsigned char* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  };
+  auto floats = [&](std::initializer_list<float> values) {
+    for (float v : values) bytes(&v, sizeof v);
+  };
+  bytes(scene.positions.data(), scene.positions.size() * sizeof(Vec3));
+  bytes(scene.normals.data(), scene.normals.size() * sizeof(Vec3));
+  bytes(scene.triangles.data(), scene.triangles.size() * sizeof(UVec3));
+  bytes(scene.triMaterial.data(), scene.triMaterial.size() * sizeof(uint32_t));
+  for (const Material& m : scene.materials) {
+    const int32_t kinds[3] = {int32_t(m.type), int32_t(m.distribution), int32_t(m.twoSidedEmission)};
+    bytes(kinds, sizeof kinds);
+    floats({m.albedo.x, m.albedo.y, m.albedo.z, m.sigmaRad, m.specular.x, m.specular.y, m.specular.z, m.ior, m.eta.x,
+            m.eta.y, m.eta.z, m.k.x, m.k.y, m.k.z, m.roughness, m.emission.x, m.emission.y, m.emission.z});
+  }
+  for (const PointLight& l : scene.pointLights)
+    floats({l.position.x, l.position.y, l.position.z, l.intensity.x, l.intensity.y, l.intensity.z});
+  return h;
+}
+}  // namespace
+
 void VoxelField::checkScene(const Scene& scene, const std::string& what) const {
   const Impl& f = *m_impl;
+  if (f.sceneHash != 0 && f.sceneHash != fieldSceneHash(scene))
+    throw SettingsError(what + ": the field was built for another scene (its geometry, materials or lights differ)");
   DVec3 origin;
   double extent;
   fieldCube(scene, f.settings.padding, origin, extent);
@@ -951,11 +1066,32 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
     throw SettingsError("field padding must be in [0, 1] (a fraction of the scene's side), got " +
                         std::to_string(settings.padding));
 
+  // The memory budget, before anything is allocated.
+  const uint64_t budget = settings.memoryBudgetBytes == VoxelSettings::kAvailableMemory ? availableMemoryBytes()
+                                                                                        : settings.memoryBudgetBytes;
+  if (budget > 0 && budget != VoxelSettings::kNoBudget) {
+    const std::vector<FieldEstimate> rows = estimate(scene, settings, true, budget);
+    if (rows.back().peakBytes > budget) {
+      std::string fits = "no level from " + std::to_string(settings.coarsestLevel) + " fits";
+      for (auto it = rows.rbegin(); it != rows.rend(); ++it)
+        if (it->peakBytes <= budget) {
+          fits = "level " + std::to_string(it->level) + " would fit (about " + megabytes(it->peakBytes) + ")";
+          break;
+        }
+      throw SettingsError("voxel level " + std::to_string(settings.level) + " needs about " +
+                          megabytes(rows.back().peakBytes) + " (the field " + megabytes(rows.back().fieldBytes) +
+                          "), more than the memory budget of " + megabytes(budget) +
+                          (settings.memoryBudgetBytes == VoxelSettings::kAvailableMemory ? " (the available memory)" : "") +
+                          "; " + fits);
+    }
+  }
+
   VoxelField field;
   Impl& f = *field.m_impl;
   f.settings = settings;
   fieldCube(scene, settings.padding, f.origin, f.extent);
   f.originF = Vec3(f.origin);
+  f.sceneHash = fieldSceneHash(scene);
   if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
   f.bounds = Bounds3(Vec3(f.origin), Vec3(f.origin + DVec3(f.extent)));
 
@@ -1340,6 +1476,9 @@ void VoxelField::write(const std::string& path, const nlohmann::json& metadata) 
   meta.insertMeta("dropped_power", openvdb::Vec3DMetadata(openvdb::Vec3d(f.dropped.x, f.dropped.y, f.dropped.z)));
   meta.insertMeta("global_photons", openvdb::Int64Metadata(int64_t(f.globalPhotons)));
   meta.insertMeta("caustic_photons", openvdb::Int64Metadata(int64_t(f.causticPhotons)));
+  char hash[17];
+  std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)f.sceneHash);
+  meta.insertMeta("scene_hash", openvdb::StringMetadata(hash));
 
   writeFileAtomic(path, [&](const std::string& tmpPath) {
     try {
@@ -1369,7 +1508,8 @@ VoxelField VoxelField::read(const std::string& path) {
       throw Error(path + ": voxcone field version " + std::to_string(version) + ", this build reads version " +
                   std::to_string(kFieldFileVersion) + " (voxelize the scene again)");
     for (const char* key : {"level", "coarsest_level", "caustic_level", "kernel_sigma", "padding", "mip_filter", "origin",
-                            "extent", "surface_area", "injected_power", "dropped_power", "global_photons", "caustic_photons"})
+                            "extent", "surface_area", "injected_power", "dropped_power", "global_photons", "caustic_photons",
+                            "scene_hash"})
       need(key);
     VoxelSettings& s = f.settings;
     s.level = meta->metaValue<int32_t>("level");
@@ -1395,6 +1535,7 @@ VoxelField VoxelField::read(const std::string& path) {
     f.dropped = DVec3(drop.x(), drop.y(), drop.z());
     f.globalPhotons = uint64_t(meta->metaValue<int64_t>("global_photons"));
     f.causticPhotons = uint64_t(meta->metaValue<int64_t>("caustic_photons"));
+    f.sceneHash = std::strtoull(meta->metaValue<std::string>("scene_hash").c_str(), nullptr, 16);
     for (int level = s.level; level >= s.coarsestLevel; --level)
       f.main.levels.push_back(readLevel(file, path, "", level, f.voxelSize(level), level != s.level));
     if (s.causticLevel > 0)

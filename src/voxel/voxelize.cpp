@@ -9,6 +9,7 @@
 #include "voxcone/scene/scene.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <atomic>
@@ -100,6 +101,29 @@ double clippedTriangleArea(const DVec3 tri[3], const DVec3& lo) {
   DVec3 sum(0.0);
   for (int a = 1; a + 1 < n; ++a) sum += glm::cross(in[a] - in[0], in[a + 1] - in[0]);
   return 0.5 * glm::length(sum);
+}
+
+uint64_t voxelBoxBound(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution) {
+  const double invVoxel = 1.0 / voxelSize;
+  const int32_t maxIndex = int32_t(resolution) - 1;
+  return tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, scene.triangleCount(), 16384), uint64_t(0),
+      [&](const tbb::blocked_range<size_t>& r, uint64_t sum) {
+        for (size_t t = r.begin(); t != r.end(); ++t) {
+          if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
+          const UVec3& tv = scene.triangles[t];
+          const DVec3 p[3] = {(DVec3(scene.positions[tv.x]) - origin) * invVoxel, (DVec3(scene.positions[tv.y]) - origin) * invVoxel,
+                              (DVec3(scene.positions[tv.z]) - origin) * invVoxel};
+          uint64_t count = 1;
+          for (int a = 0; a < 3; ++a) {
+            const double mn = std::min(p[0][a], std::min(p[1][a], p[2][a])), mx = std::max(p[0][a], std::max(p[1][a], p[2][a]));
+            count *= uint64_t(std::clamp(int32_t(std::floor(mx)), 0, maxIndex) - std::clamp(int32_t(std::floor(mn)), 0, maxIndex) + 1);
+          }
+          sum += count;
+        }
+        return sum;
+      },
+      std::plus<uint64_t>());
 }
 
 size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,

@@ -87,6 +87,9 @@ using VoxelSink = std::function<void(VoxelArrays&)>;
 size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution,
                          Progress* progress, const VoxelSink& sink, const std::vector<uint64_t>* onlyBricks = nullptr);
 
+/// An upper bound on the active voxels of that grid: the sum of the triangles' voxel boxes.
+uint64_t voxelBoxBound(const Scene& scene, const DVec3& origin, double voxelSize, uint32_t resolution);
+
 /// The (voxel, triangle) overlaps one slab of voxelizeTriangles holds at most, estimated from
 /// the triangles' voxel ranges (an upper bound): 48 bytes each while the slab is sorted.
 constexpr size_t kRegionContributions = size_t(1) << 20;

@@ -57,6 +57,58 @@ TEST_F(CliVoxel, VoxelizeBadInputFailsWithoutOutput) {
   EXPECT_FALSE(std::filesystem::exists(path("b.vdb")));
 }
 
+TEST_F(CliVoxel, RenderWithAFieldReadBack) {
+  // A field written by voxelize renders as the render's own field does: the same photons (the
+  // render's seed and counts), so the same image to the bit.
+  ASSERT_EQ(run("voxelize " + scene() + " --level 5 --photons 10000 -q -o " + path("f.vdb"), path("o.txt")), 0);
+  const std::string common = " --res 32x32 --spp 2 -t 2 -q --max-depth 16 ";
+  ASSERT_EQ(run("render " + scene() + common + "--field " + path("f.vdb") + " -o " + path("a"), path("o.txt")), 0);
+  ASSERT_EQ(run("render " + scene() + common + "--options '{\"level\": 5, \"photons\": 10000}' -o " + path("b"), path("o.txt")), 0);
+  std::ifstream side(path("a.json"));
+  const nlohmann::json j = nlohmann::json::parse(side);
+  EXPECT_EQ(j["settings"]["integrator"]["field"], path("f.vdb"));
+  EXPECT_EQ(j["settings"]["integrator"]["level"], 5);
+  EXPECT_TRUE(j["stats"]["integrator"].contains("field_read_seconds"));
+  ASSERT_EQ(run("compare " + path("a.exr") + " " + path("b.exr") + " --json", path("cmp.json")), 0);
+  std::ifstream cmp(path("cmp.json"));
+  EXPECT_EQ(nlohmann::json::parse(cmp)["relmse"].get<double>(), 0.0);
+
+  // Refused, with nothing written: another scene, a field with options it fixes, with passes
+  // that trace new photons, a missing file, another method.
+  const std::string other = test::sourceDir() + "/data/scenes/thin-wall.json";
+  EXPECT_EQ(run("render " + other + common + "--field " + path("f.vdb") + " -o " + path("c"), path("o.txt")), 2 << 8);
+  EXPECT_EQ(run("render " + scene() + common + "--field " + path("f.vdb") + " --options '{\"level\": 6}' -o " + path("c"),
+                path("o.txt")),
+            2 << 8);
+  EXPECT_EQ(run("render " + scene() + common + "--field " + path("f.vdb") + " --target-error 0.01 -o " + path("c"),
+                path("o.txt")),
+            2 << 8);
+  EXPECT_EQ(run("render " + scene() + common + "--field " + path("missing.vdb") + " -o " + path("c"), path("o.txt")), 2 << 8);
+  EXPECT_EQ(run("render " + scene() + common + "--method path --field " + path("f.vdb") + " -o " + path("c"), path("o.txt")),
+            2 << 8);
+  EXPECT_FALSE(std::filesystem::exists(path("c.exr")));
+}
+
+TEST_F(CliVoxel, MemoryBudgetRefusesBeforeVoxelizing) {
+  // Level 10 of the cornell box needs tens of MB: refused at 5 MB with the level that fits,
+  // and nothing written; without a budget (0) it is voxelized.
+  const std::string err = path("err.txt");
+  const std::string cmd = std::string(VOXCONE_CLI_PATH) + " voxelize " + scene() +
+                          " --level 10 --photons 1000 -q --memory-budget-mb 5 -o " + path("big.vdb") + " 2> " + err;
+  EXPECT_EQ(std::system(cmd.c_str()), 2 << 8);
+  std::ifstream e(err);
+  const std::string text((std::istreambuf_iterator<char>(e)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("voxel level 10 needs about"), std::string::npos) << text;
+  EXPECT_NE(text.find("memory budget of 5 MB"), std::string::npos) << text;
+  EXPECT_NE(text.find("would fit"), std::string::npos) << text;
+  EXPECT_FALSE(std::filesystem::exists(path("big.vdb")));
+  EXPECT_EQ(run("render " + scene() + " --res 16x16 --spp 1 -q --memory-budget-mb 1 --options '{\"level\": 9}' -o " +
+                    path("r"),
+                path("o.txt")),
+            2 << 8);
+  EXPECT_EQ(run("voxelize " + scene() + " --level 6 --photons 1000 -q --memory-budget-mb 0", path("o.txt")), 0);
+}
+
 TEST_F(CliVoxel, StudyMemoryWritesCsvJsonAndChart) {
   ASSERT_EQ(run("study memory " + scene() + " --levels 4..5 --photons 5000 -o " + path("study"), path("o.txt")), 0);
   std::ifstream f(path("study/memory.json"));

@@ -598,6 +598,58 @@ TEST_F(VoxelWrite, ReadBackIsExact) {
   EXPECT_THROW(VoxelField::read(plain), Error);
 }
 
+TEST(VoxelField, EstimateMatchesTheBuiltField) {
+  // The estimate, from a count two levels down, against the field built: the finest level's
+  // voxels within 25% (a probe of level 4 and less, 16 voxels across, is coarser: level 6 came
+  // out 30% high) and the field's bytes between what it takes and twice that (the estimate
+  // lights every voxel; these photons light a part).
+  const Scene scene = shapesScene(
+      {planeAt(0.0f), quadJson({0, 0, 0.1f}, {1, 0, 0.9f}, {1, 1, 0.9f}, {0, 1, 0.1f}),
+       R"({"type": "sphere", "center": [0.5, 0.5, 0.5], "radius": 0.3, "material": "white", "subdivisions": 5})"});
+  for (int level : {7, 8, 9}) {
+    SCOPED_TRACE(level);
+    VoxelSettings settings;
+    settings.level = level;
+    settings.coarsestLevel = 2;
+    const std::vector<FieldEstimate> rows = VoxelField::estimate(scene, settings);
+    ASSERT_EQ(rows.size(), size_t(level - 1));
+    EXPECT_EQ(rows.back().level, level);
+    EXPECT_EQ(rows.back().probeLevel, level - 2);
+    VoxelField field = VoxelField::voxelize(scene, settings);
+    PhotonMaps maps;
+    maps.global = photonsOnScene(scene, 20000);
+    field.inject(maps);
+    field.buildMips();
+    const double voxels = double(field.activeVoxels(level));
+    EXPECT_NEAR(double(rows.back().voxels), voxels, 0.25 * voxels);
+    EXPECT_GT(double(rows.back().fieldBytes), 0.9 * double(field.memoryBytes()));
+    EXPECT_LT(double(rows.back().fieldBytes), 2.0 * double(field.memoryBytes()));
+    EXPECT_GT(rows.back().peakBytes, rows.back().fieldBytes);
+    // Coarser finest levels need less.
+    for (size_t r = 1; r < rows.size(); ++r) EXPECT_LT(rows[r - 1].peakBytes, rows[r].peakBytes);
+  }
+  // A budget below the estimate refuses before voxelizing, naming the level that fits.
+  VoxelSettings settings;
+  settings.level = 9;
+  const std::vector<FieldEstimate> rows = VoxelField::estimate(scene, settings);
+  const uint64_t need = rows.back().peakBytes;
+  settings.memoryBudgetBytes = need / 2;
+  int fits = 0;
+  for (const FieldEstimate& r : rows)
+    if (r.peakBytes <= need / 2) fits = r.level;
+  ASSERT_GT(fits, 2);
+  try {
+    VoxelField::voxelize(scene, settings);
+    ADD_FAILURE() << "not refused";
+  } catch (const SettingsError& e) {
+    EXPECT_NE(std::string(e.what()).find("level " + std::to_string(fits) + " would fit"), std::string::npos) << e.what();
+  }
+  settings.memoryBudgetBytes = 1000;
+  EXPECT_THROW(VoxelField::voxelize(scene, settings), SettingsError);
+  settings.memoryBudgetBytes = need;
+  EXPECT_NO_THROW(VoxelField::voxelize(scene, settings));
+}
+
 TEST(VoxelField, RejectsBadSettings) {
   const Scene scene = shapesScene({planeAt(0.0f)});
   VoxelSettings s;

@@ -24,5 +24,8 @@ private:
 uint64_t peakRssBytes();
 /// Current resident set size of this process, bytes (0 where unknown).
 uint64_t currentRssBytes();
+/// Memory the machine can give without swapping (MemAvailable of /proc/meminfo), bytes (0
+/// where unknown).
+uint64_t availableMemoryBytes();
 
 }  // namespace voxcone

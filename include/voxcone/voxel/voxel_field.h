@@ -67,6 +67,26 @@ struct VoxelSettings {
   /// so that no surface sits on the field's boundary (see kDefaultFieldPadding); [0, 1].
   double padding = kDefaultFieldPadding;
   MipFilter mipFilter = MipFilter::Box;
+  /// Memory the field may take, bytes, checked before voxelizing (VoxelField::estimate): a
+  /// level whose estimated peak exceeds it is refused with an error naming the finest level
+  /// that fits. kAvailableMemory: the machine's available memory at that moment; kNoBudget: no check.
+  uint64_t memoryBudgetBytes = kAvailableMemory;
+  static constexpr uint64_t kAvailableMemory = 0;
+  static constexpr uint64_t kNoBudget = ~uint64_t(0);
+  /// memoryBudgetBytes of a budget in MB (10^6 bytes) as users give it: negative (not given)
+  /// the available memory, 0 no budget.
+  static uint64_t budgetFromMegabytes(double mb) {
+    return mb < 0.0 ? kAvailableMemory : mb == 0.0 ? kNoBudget : uint64_t(mb * 1e6 < 1.0 ? 1.0 : mb * 1e6);
+  }
+};
+
+/// The memory a field would take, estimated before voxelizing it (VoxelField::estimate).
+struct FieldEstimate {
+  int level = 0;                 ///< finest level
+  uint64_t voxels = 0;           ///< active voxels at the finest level
+  uint64_t fieldBytes = 0;       ///< every grid and mip, every voxel's radiance lit
+  uint64_t peakBytes = 0;        ///< fieldBytes plus what voxelizing, injecting and the mips hold at once
+  int probeLevel = 0;            ///< the level counted exactly (0: bounded from the triangles alone)
 };
 
 /// Memory and time of one grid at one level.
@@ -121,8 +141,21 @@ public:
   /// With `causticPhotons`, the caustic grid (settings.causticLevel) holds only the voxels
   /// those photons' footprints reach (what inject keeps of it anyway), instead of the whole
   /// scene at that level; without, it is voxelized whole.
+  /// Throws SettingsError before allocating when the estimate (estimate()) exceeds
+  /// settings.memoryBudgetBytes.
   static VoxelField voxelize(const Scene& scene, const VoxelSettings& settings, Progress* progress = nullptr,
                              const std::vector<Photon>* causticPhotons = nullptr);
+
+  /// The memory of the main grid at settings.level, from a cheap count: the active voxels and
+  /// bricks of a probe level (level - 2, at most 9) voxelized exactly and streamed away, and
+  /// per finest level the bricks of level L taken as the probe's voxels two levels down, the
+  /// voxels per brick as the probe's (surfaces fill bricks alike at every level), the stated
+  /// bytes per voxel and per brick of each grid (voxel_field.cpp), every voxel lit. With
+  /// `quick`, first an upper bound from the triangles' voxel boxes, and the count only when the
+  /// bound exceeds `budget`. Rows for every finest level from settings.coarsestLevel up to
+  /// settings.level. Measured against the built fields in tests/voxel.
+  static std::vector<FieldEstimate> estimate(const Scene& scene, const VoxelSettings& settings, bool quick = false,
+                                             uint64_t budget = 0);
 
   /// Splat photon power into the finest level with a normalized Gaussian footprint and turn it
   /// into outgoing radiance L = albedo / pi * E, E = power / surface area in the voxel. Caustic

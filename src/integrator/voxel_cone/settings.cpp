@@ -49,6 +49,13 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   for (const Material& m : scene.materials) anyDelta = anyDelta || m.isDelta();
   out.maxDepth = render.maxDepth;
 
+  out.fieldPath = r.text("field", "");
+  if (!out.fieldPath.empty())
+    for (const char* fixed : {"level", "coarsest_level", "caustic_level", "kernel_sigma", "mip_filter", "photons",
+                              "caustic_photons", "memory_budget_mb"})
+      if (r.has(fixed))
+        throw SettingsError(std::string("voxcone.") + fixed + ": the field (voxcone.field) fixes it; give one or the other");
+
   VoxelSettings& v = out.voxel;
   v.level = r.integer("level", kDefaultLevel, 1, 12);
   v.coarsestLevel = r.integer("coarsest_level", std::min(1, v.level), 0, v.level);
@@ -57,6 +64,8 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
     throw SettingsError("voxcone.caustic_level: must be 0 or at least coarsest_level");
   v.kernelSigmaVoxels = float(r.number("kernel_sigma", 0.75, 0.05, 16.0));
   v.mipFilter = r.choice("mip_filter", mipFilterNames()) == "gaussian" ? MipFilter::Gaussian : MipFilter::Box;
+  // MB (10^6 bytes); 0: no budget; absent: the machine's available memory (VoxelSettings).
+  v.memoryBudgetBytes = VoxelSettings::budgetFromMegabytes(r.number("memory_budget_mb", -1.0, 0.0, 1e12));
 
   uint64_t photons, causticPhotons;
   defaultPhotonCounts(render.photons, render.causticPhotons, kVoxconeDefaultPhotons, kVoxconeDefaultCausticPhotons,
@@ -107,7 +116,8 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"gather_spacing", gatherSpacing},
           {"exact_segment", exactSegment},
           {"gather", hitGather ? "hit" : "march"},
-          {"view", viewNames()[size_t(view)]}};
+          {"view", viewNames()[size_t(view)]},
+          {"field", fieldPath}};
 }
 
 }  // namespace voxcone

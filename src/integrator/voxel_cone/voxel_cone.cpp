@@ -43,21 +43,45 @@ void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
 
 void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   Timer total;
+  if (!m_settings.fieldPath.empty() && !keepVoxels) {
+    // A field read back (voxelize -o): its light, its settings; no photons traced.
+    m_tracer.reset();
+    m_field = VoxelField::read(m_settings.fieldPath);
+    m_field.checkScene(m_scene, m_settings.fieldPath);
+    const uint64_t budget = m_settings.voxel.memoryBudgetBytes;
+    m_settings.voxel = m_field.settings();
+    m_settings.voxel.memoryBudgetBytes = budget;
+    m_settings.photons.photons = m_settings.photons.causticPhotons = 0;
+    m_stats = nlohmann::json::object();
+    m_stats["field_read_seconds"] = total.seconds();
+    m_stats["prepare_seconds"] = total.seconds();
+    m_stats["peak_rss_bytes_after_prepare"] = peakRssBytes();
+    m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
+    const int causticLevel = m_field.settings().causticLevel;
+    m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
+    return;
+  }
   const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
   m_stats = maps.stats.toJson();
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
+  const uint64_t photonPeak = peakRssBytes();
   Timer t;
   if (!keepVoxels) {
     m_tracer.reset();
     m_field = VoxelField::voxelize(m_scene, m_settings.voxel, progress, &maps.caustic);
   }
   m_stats["voxelize_seconds"] = t.seconds();
+  // The process's peak resident set after each stage (its high-water mark so far).
+  nlohmann::json peakAfter = {{"photons", photonPeak}, {"voxelize", peakRssBytes()}};
   t.reset();
   m_field.inject(maps, progress);
   m_stats["inject_seconds"] = t.seconds();
+  peakAfter["inject"] = peakRssBytes();
   t.reset();
   m_field.buildMips(progress);
   m_stats["mips_seconds"] = t.seconds();
+  peakAfter["mips"] = peakRssBytes();
+  m_stats["peak_rss_bytes_after"] = peakAfter;
   m_stats["prepare_seconds"] = total.seconds();
   m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
   const int causticLevel = m_field.settings().causticLevel;

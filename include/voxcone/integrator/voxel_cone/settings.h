@@ -37,6 +37,10 @@ struct VoxelConeSettings {
   float exactSegment = 32.0f;   ///< exact ray along each cone axis, finest voxels (0: off)
   bool hitGather = false;       ///< gather = "hit" instead of "march"
   View view = View::Full;
+  /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead
+  /// of tracing photons and voxelizing; its settings (levels, footprint, mip filter, photons)
+  /// are the field's, so those options may not be given with it.
+  std::string fieldPath;
 
   /// Read `options` for `scene` rendered with `render` (whose photon counts and seed are the
   /// defaults' base); unknown keys and values out of range are SettingsErrors.
