@@ -29,6 +29,9 @@ def series(study):
         "voxelize_s": [r["voxelize_seconds"] for r in rows],
         "inject_s": [r["inject_seconds"] for r in rows],
         "mip_s": [r["mip_seconds"] for r in rows],
+        "prepare_s": [r.get("prepare_seconds", 0.0) for r in rows],
+        "estimate_mb": [r.get("estimate", {}).get("field_bytes", 0) / 1e6 for r in rows],
+        "photons_stored": [r.get("photons_stored", 0) for r in rows],
         "reference_levels": sorted(REFERENCE_MB),
         "reference_mb": [REFERENCE_MB[k] for k in sorted(REFERENCE_MB)],
         "failed_levels": [r["level"] for r in study["rows"] if "error" in r],
@@ -53,6 +56,8 @@ def main(argv):
     for g, style in zip(GRIDS, [":", "--", "-.", (0, (3, 1, 1, 1)), (0, (5, 2)), (0, (1, 2)), (0, (2, 1))]):
         ax_mem.plot(s["levels"], s[g + "_mb"], linestyle=style, lw=1, label=g)
     ax_mem.plot(s["levels"], s["peak_rss_mb"], "s-", color="tab:gray", lw=1, ms=4, label="voxcone: peak RSS")
+    ax_mem.plot(s["levels"], s["estimate_mb"], "x--", color="tab:purple", lw=1, ms=5,
+                label="estimate before voxelizing (every voxel lit)")
     ax_mem.plot(s["reference_levels"], s["reference_mb"], "D--", color="tab:red", lw=1.5,
                 label="reference study (same dragon)")
     for lv, mb in zip(s["reference_levels"], s["reference_mb"]):
@@ -65,11 +70,16 @@ def main(argv):
     ax_mem.set_ylabel("memory (MB)")
     ax_mem.set_title("voxel field memory: " + str(study.get("scene", "")).split("/")[-1])
     ax_mem.grid(True, which="both", alpha=0.3)
-    ax_mem.legend(fontsize=7)
+    ax_mem.legend(fontsize=6, loc="upper left", ncol=2)
 
     ax_time.plot(s["levels"], s["voxelize_s"], "o-", label="voxelize")
-    ax_time.plot(s["levels"], s["inject_s"], "s-", label="inject %d photons" % study.get("photons", 0))
+    photons = study.get("photons", 0)
+    stored = max(s["photons_stored"]) if s["photons_stored"] else 0
+    label = ("inject %d photons" % photons) if isinstance(photons, int) and photons > 0 else (
+        "inject the scene's photons (%d stored)" % stored)
+    ax_time.plot(s["levels"], s["inject_s"], "s-", label=label)
     ax_time.plot(s["levels"], s["mip_s"], "^-", label="mips")
+    ax_time.plot(s["levels"], s["prepare_s"], "k.-", lw=1.5, label="photons + voxelize + inject + mips")
     ax_time.set_yscale("log")
     ax_time.set_xlabel("voxel level L")
     ax_time.set_ylabel("time (s)")

@@ -1005,14 +1005,21 @@ std::vector<FieldEstimate> VoxelField::estimate(const Scene& scene, const VoxelS
 }
 
 namespace {
-/// FNV-1a over what a field's content depends on: geometry (positions, smooth normals,
+/// A hash (FNV-1a on words) of what a field's content depends on: geometry (positions, smooth normals,
 /// triangles, their materials), the materials' optical values and the point lights; not the
 /// camera or the render settings, so one field serves many views.
 uint64_t fieldSceneHash(const Scene& scene) {
+  // FNV-1a's step on 8-byte words (a byte at a time was 19 ms on the dragon), the tail by bytes.
   uint64_t h = 1469598103934665603ull;
   auto bytes = [&](const void* data, size_t n) {
     const unsigned char* p = static_cast<const unsigned char*>(data);
-    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+      uint64_t w;
+      std::memcpy(&w, p + i, 8);
+      h = (h ^ w) * 1099511628211ull;
+    }
+    for (; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
   };
   auto floats = [&](std::initializer_list<float> values) {
     for (float v : values) bytes(&v, sizeof v);

@@ -252,8 +252,14 @@ size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSi
   const size_t regions = cuts.size() - 1;
   // Each slab's items, in item (triangle) order, their x range cut to the slab.
   std::vector<std::vector<WorkItem>> regionItems(regions);
-  {
+  if (regions == 1) {
+    regionItems[0].swap(items);
+  } else {
     auto regionOf = [&](int32_t x) { return size_t(std::upper_bound(cuts.begin(), cuts.end(), x) - cuts.begin()) - 1; };
+    std::vector<size_t> counts(regions, 0);
+    for (const WorkItem& item : items)
+      for (size_t r = regionOf(item.lo[0]); r < regions && cuts[r] <= item.hi[0]; ++r) ++counts[r];
+    for (size_t r = 0; r < regions; ++r) regionItems[r].reserve(counts[r]);
     for (const WorkItem& item : items)
       for (size_t r = regionOf(item.lo[0]); r < regions && cuts[r] <= item.hi[0]; ++r) {
         WorkItem cut = item;
