@@ -1,7 +1,7 @@
 #pragma once
 /// \file voxel_field.h
 /// The sparse voxel radiance field: scene surfaces voxelized into OpenVDB grids at a finest
-/// level and its coarser mip levels (the octree), carrying opacity, normal, diffuse albedo and
+/// level and its coarser mip levels (the octree), carrying opacity, normal and each side's
 /// outgoing diffuse radiance from injected photons. OpenVDB types stay inside src/voxel/.
 ///
 /// Levels: level L has 2^L voxels across the longest axis of the scene bounds (level 10 =
@@ -91,7 +91,7 @@ struct FieldEstimate {
 
 /// Memory and time of one grid at one level.
 struct VoxelGridStats {
-  std::string grid;          ///< "opacity", "normal", "axes" (mips), "albedo", "radiance", "radiance_back", "albedo", "radiance", "caustic", "topology"
+  std::string grid;          ///< "topology", "opacity", "normal", "axes" (mips), "diffuse" (finest), "radiance", "radiance_back", "cone_table", "caustic"
   int level = 0;
   double voxelSize = 0.0;    ///< world units
   uint64_t activeVoxels = 0;
@@ -133,8 +133,8 @@ public:
 
   /// Voxelize the scene's surfaces at settings.level: only voxels a triangle passes through
   /// are active (triangle-box overlap, Akenine-Möller 2001); per voxel the surface area inside
-  /// it, the area-weighted normal and diffuse albedo. Mirrors and metals get opacity but no
-  /// albedo (they gather no light). Smooth glass (MaterialType::Dielectric) is left out: a
+  /// it, the area-weighted normal and the diffuse part of that area (mirrors, metals and glossy
+  /// surfaces get opacity but gather no light; photons bring the albedo, Photon::albedo). Smooth glass (MaterialType::Dielectric) is left out: a
   /// cone's lookups see through it to what it passes on, unbent, and its exact axis ray
   /// refracts through it (ConeTracer); as a black occluder it cost the glass dragon 0.7 dB at
   /// 4 spp. Throws SettingsError for bad settings (and a scene of glass alone: nothing to hold).
@@ -157,18 +157,19 @@ public:
   static std::vector<FieldEstimate> estimate(const Scene& scene, const VoxelSettings& settings, bool quick = false,
                                              uint64_t budget = 0);
 
-  /// Splat photon power into the finest level with a normalized Gaussian footprint and turn it
-  /// into outgoing radiance L = albedo / pi * E, E = power / surface area in the voxel. Caustic
+  /// Splat each photon's reflected power (power * Photon::albedo) into the finest level with a
+  /// normalized Gaussian footprint and turn it into outgoing radiance L = Phi_r / (pi A), A the
+  /// voxel's surface area: the mean over that surface of albedo / pi * E. Caustic
   /// photons go to the main grid too (it holds all diffuse radiance: the global map covers
   /// every light path but L S+ D, the caustic map those) and to the caustic grid when
   /// settings.causticLevel > 0. Identical at any thread count.
   /// Each voxel keeps the two sides of its surface apart (front: the side its wound mean
   /// normal points to): a panel lit from above stays dark below. The footprint covers the
-  /// active voxels within 3 sigma that hold diffuse albedo and whose mean normal lies within 60
+  /// active voxels within 3 sigma that hold diffuse surface and whose mean normal lies within 60
   /// degrees of the photon's normal (the same surface, not another across a crease), on their
   /// front; where there is none, those within 60 degrees of its opposite, on their back (an
   /// open panel lit from behind its winding). Weights exp(-d^2 / 2 sigma^2) times the voxel's
-  /// surface area, normalized to one. Without such a voxel the photon goes to the voxel
+  /// diffuse surface area, normalized to one. Without such a voxel the photon goes to the voxel
   /// containing it, on the side it arrived on, else it is dropped (droppedPower()). Replaces
   /// earlier injections and drops the mips built from them: call buildMips again.
   void inject(const PhotonMaps& photons, Progress* progress = nullptr);
@@ -179,7 +180,7 @@ public:
   /// surfaces: front and back swap when turned), then normal = opacity-weighted sum
   /// (renormalized), front and back radiance = opacity-weighted means, opacity-weighted mean
   /// |normal| per axis (for VoxelSample::projected).
-  /// Albedo stays at the finest level only (nothing gathers it from mips).
+  /// The diffuse fraction stays at the finest level only (injection alone reads it).
   void buildMips(Progress* progress = nullptr);
 
   const VoxelSettings& settings() const;
@@ -202,8 +203,8 @@ public:
   /// (the caustic light of the surface's other side stays there).
   Vec3 causticRadiance(const Vec3& worldPos, const Vec3& viewFrom) const;
 
-  /// Totals used by tests: sum over the finest level of radiance * pi / albedo * area (the
-  /// injected flux), per channel.
+  /// Photon power (W per channel) the last inject() put into the finest level (before the
+  /// albedo: what conservation tests compare with the photons' sum).
   Vec3 injectedPower() const;
   /// Photon power (W per channel) of the last inject() that found no active voxel: photons
   /// outside every voxel's surface are dropped and counted here.
