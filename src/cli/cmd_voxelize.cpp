@@ -105,7 +105,9 @@ void runVoxelize(const VoxelizeOptions& o) {
   nlohmann::json rows = nlohmann::json::array();
   for (const VoxelGridStats& g : field.stats())
     rows.push_back({{"grid", g.grid}, {"level", g.level}, {"voxel_size", g.voxelSize}, {"active_voxels", g.activeVoxels},
-                    {"leaves", g.leaves}, {"bytes", g.bytes}, {"seconds", g.seconds}});
+                    {"leaves", g.leaves}, {"bytes", g.bytes},
+                    {"bytes_per_voxel", g.activeVoxels > 0 ? double(g.bytes) / double(g.activeVoxels) : 0.0},
+                    {"seconds", g.seconds}});
   j["grids"] = rows;
   const FieldEstimate& est = estimates.back();
   j["estimate"] = {{"voxels", est.voxels}, {"field_bytes", est.fieldBytes}, {"peak_bytes", est.peakBytes},
