@@ -34,7 +34,7 @@ build() {
 cmd=${1:-render}
 shift || true
 case "$cmd" in
-  deps) install_deps ;;
+  deps) install_deps "$@" ;;
   build) install_deps; build ON ;;
   render)
     install_deps python3-matplotlib

@@ -199,8 +199,11 @@ void runRender(const RenderOptions& o) {
                    {"indirect_filter", result.filterStats}};
 
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
-  // The EXR and the PNG are written side by side (5 and 6.5 ms at 256x256, one after the other
-  // 11.5 ms of a 0.13 s render); each is atomic on its own.
+  // The three files are a set (OutputSet): written to temporaries, the EXR and the PNG side by
+  // side (5 and 6.5 ms at 256x256, one after the other 11.5 ms of a 0.13 s render), then renamed
+  // together, the sidecar last (it marks a set complete: batch --skip-existing). Any failure
+  // leaves none of them.
+  OutputSet files;
   t.reset();
   double exrSec = 0.0;
   std::exception_ptr exrError, pngError;
@@ -208,7 +211,7 @@ void runRender(const RenderOptions& o) {
   writes.run([&] {
     try {
       Timer te;
-      writeExr(exrPath, result.image, meta);
+      writeExr(exrPath, result.image, meta, &files);
       exrSec = te.seconds();
     } catch (...) {
       exrError = std::current_exception();
@@ -216,33 +219,19 @@ void runRender(const RenderOptions& o) {
   });
   writes.run_and_wait([&] {
     try {
-      writePng(pngPath, result.image);
+      writePng(pngPath, result.image, &files);
     } catch (...) {
       pngError = std::current_exception();
     }
   });
-  if (exrError || pngError) {
-    // Not half a set: the one that was written goes too.
-    std::error_code ec;
-    if (!exrError) std::filesystem::remove(exrPath, ec);
-    if (!pngError) std::filesystem::remove(pngPath, ec);
-    std::rethrow_exception(exrError ? exrError : pngError);
-  }
+  if (exrError || pngError) std::rethrow_exception(exrError ? exrError : pngError);
   meta["timings"]["write_seconds"] = t.seconds();
   meta["timings"]["write_exr_seconds"] = exrSec;
   meta["timings"]["total_seconds"] = total.seconds();
   meta["peak_rss_bytes"] = peakRssBytes();
   meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};
-  try {
-    writeJsonAtomic(jsonPath, meta);
-  } catch (...) {
-    // The sidecar, written last, is what marks a set complete (batch --skip-existing): without
-    // it the images go too, so no half set stays behind.
-    std::error_code ec;
-    std::filesystem::remove(exrPath, ec);
-    std::filesystem::remove(pngPath, ec);
-    throw;
-  }
+  writeJsonAtomic(jsonPath, meta, &files);
+  files.commit(jsonPath);
   std::printf("wrote %s (%s, %s)\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str());
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
               settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());

@@ -1,4 +1,5 @@
-// voxcone: the command-line front end. Library errors become one line on stderr and exit 2.
+// voxcone: the command-line front end. Usage and library errors become one line on stderr and
+// exit 2.
 
 #include "commands.h"
 #include "voxcone/core/error.h"
@@ -53,7 +54,11 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version print and succeed; every usage error is one line and exit 2 like
+    // any other bad input (CLI11's own codes, 105-114, said nothing a script could use).
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::fprintf(stderr, "voxcone: usage error: %s (see voxcone --help)\n", printable(e.what()).c_str());
+    return 2;
   } catch (const voxcone::NotMetError& e) {
     std::fprintf(stderr, "voxcone: not met: %s\n", printable(e.what()).c_str());
     return 3;

@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -69,22 +70,33 @@ void removeStaleTemporaries(const fs::path& dir, const fs::path& target) {
   }
 }
 
-/// writeFileAtomic throwing ErrorT, so that image writes report ImageError as documented.
+/// The temporary `path` is written to: ".<stem>.tmp-<pid>-<counter><ext>" in its folder,
+/// hidden, unique, and with the target's extension so that OpenImageIO picks the same format
+/// for the temporary as for the target. Stale temporaries of the target go first.
 template <typename ErrorT>
-void atomicWrite(const std::string& path, const std::function<void(const std::string&)>& writer) {
+std::string temporaryFor(const std::string& path) {
   const fs::path target(path);
   if (target.filename().empty()) throw ErrorT(path + ": not a file path");
   const fs::path dir = target.parent_path().empty() ? fs::path(".") : target.parent_path();
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw ErrorT(path + ": directory " + dir.string() + " does not exist");
-
-  // ".<stem>.tmp-<pid>-<counter><ext>": hidden, unique, and with the target's extension so that
-  // OpenImageIO picks the same format for the temporary as for the target.
   removeStaleTemporaries(dir, target);
   const std::string tmpName = "." + target.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
                               std::to_string(g_tmpCounter.fetch_add(1)) + target.extension().string();
-  const std::string tmpPath = (dir / tmpName).string();
+  return (dir / tmpName).string();
+}
 
+/// writeFileAtomic throwing ErrorT, so that image writes report ImageError as documented; with
+/// `set`, the temporary joins the set instead of being renamed now.
+template <typename ErrorT>
+void atomicWrite(const std::string& path, const std::function<void(const std::string&)>& writer,
+                 OutputSet* set = nullptr) {
+  if (set) {
+    set->add(path, writer);
+    return;
+  }
+  const std::string tmpPath = temporaryFor<ErrorT>(path);
+  std::error_code ec;
   try {
     writer(tmpPath);
     if (std::rename(tmpPath.c_str(), path.c_str()) != 0)
@@ -153,23 +165,61 @@ void writeFileAtomic(const std::string& path, const std::function<void(const std
   atomicWrite<Error>(path, writer);
 }
 
-void writeJsonAtomic(const std::string& path, const nlohmann::json& value) {
+OutputSet::~OutputSet() {
+  if (m_committed) return;
+  std::error_code ec;
+  for (const Entry& e : m_entries) fs::remove(e.tmp, ec);
+}
+
+void OutputSet::add(const std::string& path, const std::function<void(const std::string& tmpPath)>& writer) {
+  const std::string tmp = temporaryFor<Error>(path);
+  try {
+    writer(tmp);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+  std::lock_guard<std::mutex> lock(m_mutex);
+  m_entries.push_back({path, tmp});
+}
+
+void OutputSet::commit(const std::string& last) {
+  std::lock_guard<std::mutex> lock(m_mutex);
+  // `last` (the sidecar that marks a set complete) is renamed after every other file.
+  std::stable_partition(m_entries.begin(), m_entries.end(), [&](const Entry& e) { return e.path != last; });
+  for (size_t i = 0; i < m_entries.size(); ++i) {
+    if (std::rename(m_entries[i].tmp.c_str(), m_entries[i].path.c_str()) == 0) continue;
+    const std::string why = std::strerror(errno);
+    // Not part of a set: the files renamed before this one go, and the temporaries after it.
+    std::error_code ec;
+    for (size_t k = 0; k < m_entries.size(); ++k) fs::remove(k < i ? m_entries[k].path : m_entries[k].tmp, ec);
+    m_committed = true;
+    throw Error(m_entries[i].path + ": cannot rename temporary file " + m_entries[i].tmp + ": " + why);
+  }
+  m_committed = true;
+}
+
+void writeJsonAtomic(const std::string& path, const nlohmann::json& value, OutputSet* set) {
   std::string text;
   try {
     text = value.dump(2) + "\n";
   } catch (const nlohmann::json::exception& e) {
     throw Error(path + ": cannot serialise JSON: " + e.what());
   }
-  writeFileAtomic(path, [&](const std::string& tmpPath) {
-    std::ofstream file(tmpPath, std::ios::binary | std::ios::trunc);
-    if (!file) throw Error(path + ": cannot open temporary file " + tmpPath + ": " + std::strerror(errno));
-    file << text;
-    file.close();
-    if (!file) throw Error(path + ": cannot write temporary file " + tmpPath);
-  });
+  atomicWrite<Error>(
+      path,
+      [&](const std::string& tmpPath) {
+        std::ofstream file(tmpPath, std::ios::binary | std::ios::trunc);
+        if (!file) throw Error(path + ": cannot open temporary file " + tmpPath + ": " + std::strerror(errno));
+        file << text;
+        file.close();
+        if (!file) throw Error(path + ": cannot write temporary file " + tmpPath);
+      },
+      set);
 }
 
-void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata) {
+void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata, OutputSet* set) {
   checkImage(path, image);
   OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
   // Lossless RLE: a rendered float image barely compresses (zip: 730 KB instead of 795 KB
@@ -184,12 +234,11 @@ void writeExr(const std::string& path, const Image& image, const nlohmann::json&
     if (whole.size() <= kMaxExrMetadataBytes) spec.attribute("voxcone:metadata", whole);
   }
   static_assert(sizeof(Vec3) == 3 * sizeof(float), "Image pixels must be packed float RGB");
-  atomicWrite<ImageError>(path, [&](const std::string& tmpPath) {
-    writeWithOiio(path, tmpPath, spec, image.pixels.data());
-  });
+  atomicWrite<ImageError>(
+      path, [&](const std::string& tmpPath) { writeWithOiio(path, tmpPath, spec, image.pixels.data()); }, set);
 }
 
-void writePng(const std::string& path, const Image& image) {
+void writePng(const std::string& path, const Image& image, OutputSet* set) {
   checkImage(path, image);
   // Quantise with toSrgb8 ourselves so that the file holds exactly the codes metrics use.
   std::vector<uint8_t> codes(image.pixels.size() * 3);
@@ -203,9 +252,8 @@ void writePng(const std::string& path, const Image& image) {
   spec.attribute("oiio:ColorSpace", "sRGB");
   // zlib level 1: 6.5 ms instead of 18 ms at 256x256 (the default 6), 74 KB.
   spec.attribute("png:compressionLevel", 1);
-  atomicWrite<ImageError>(path, [&](const std::string& tmpPath) {
-    writeWithOiio(path, tmpPath, spec, codes.data());
-  });
+  atomicWrite<ImageError>(
+      path, [&](const std::string& tmpPath) { writeWithOiio(path, tmpPath, spec, codes.data()); }, set);
 }
 
 void writeImage(const std::string& path, const Image& image, const nlohmann::json& metadata) {

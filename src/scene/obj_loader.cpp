@@ -36,6 +36,10 @@ Vec3 toVec3(const tinyobj::real_t* v) { return Vec3(float(v[0]), float(v[1]), fl
 
 }  // namespace
 
+namespace {
+TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std::string& path);
+}  // namespace
+
 TriangleMesh loadObj(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw MeshError(path, "cannot open file: no such file");
@@ -46,6 +50,21 @@ TriangleMesh loadObj(const std::string& path) {
   config.vertex_color = false;
   tinyobj::ObjReader reader;
   const bool ok = reader.ParseFromFile(path, config);
+  return meshFromReader(reader, ok, path);
+}
+
+TriangleMesh parseObj(const std::string& objText, const std::string& mtlText, const std::string& name) {
+  tinyobj::ObjReaderConfig config;
+  config.triangulate = true;
+  config.vertex_color = false;
+  tinyobj::ObjReader reader;
+  const bool ok = reader.ParseFromString(objText, mtlText, config);
+  return meshFromReader(reader, ok, name);
+}
+
+namespace {
+/// The mesh of a parsed OBJ, every corner validated; errors name `path`.
+TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std::string& path) {
   if (!ok || !reader.Error().empty()) {
     const std::string msg = firstLine(reader.Error());
     throw MeshError(path, msg.empty() ? "cannot parse OBJ" : msg);
@@ -155,6 +174,7 @@ TriangleMesh loadObj(const std::string& path) {
   if (anyMaterial) mesh.faceMaterial = std::move(faceMaterial);
   return mesh;
 }
+}  // namespace
 
 TriangleMesh loadMesh(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();

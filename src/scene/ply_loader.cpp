@@ -109,6 +109,16 @@ public:
 
   TriangleMesh read() {
     readFile();
+    return parse();
+  }
+  /// `bytes` as the file's content (named m_path in errors).
+  TriangleMesh read(std::string bytes) {
+    m_data = std::move(bytes);
+    return parse();
+  }
+
+private:
+  TriangleMesh parse() {
     parseHeader();
     setUpRoles();
     for (const PlyElement& e : m_elements) {
@@ -121,7 +131,6 @@ public:
     return std::move(m_mesh);
   }
 
-private:
   [[noreturn]] void fail(const std::string& what) const { throw MeshError(m_path, what); }
 
   //--------------------------------------------------------------------------------------------
@@ -599,5 +608,6 @@ private:
 }  // namespace
 
 TriangleMesh loadPly(const std::string& path) { return PlyReader(path).read(); }
+TriangleMesh parsePly(std::string bytes, const std::string& name) { return PlyReader(name).read(std::move(bytes)); }
 
 }  // namespace voxcone

@@ -287,6 +287,50 @@ TEST_F(ImageIoTest, AtomicWriterThrowLeavesNoFile) {
   EXPECT_EQ(entries(), std::vector<std::string>{"old.txt"});
 }
 
+TEST_F(ImageIoTest, OutputSetAppearsWholeOrNotAtAll) {
+  Image img(4, 3);
+  img.pixels.assign(12, Vec3(0.25f, 0.5f, 1.0f));
+  // Committed: all three, nothing else; the sidecar renamed last.
+  {
+    OutputSet set;
+    writeExr(path("a.exr"), img, {{"k", 1}}, &set);
+    writePng(path("a.png"), img, &set);
+    writeJsonAtomic(path("a.json"), {{"done", true}}, &set);
+    EXPECT_EQ(entries().size(), 3u);  // the temporaries alone so far
+    for (const char* f : {"a.exr", "a.png", "a.json"}) EXPECT_FALSE(fs::exists(path(f))) << f;
+    set.commit(path("a.json"));
+  }
+  EXPECT_EQ(entries(), (std::vector<std::string>{"a.exr", "a.json", "a.png"}));
+  EXPECT_EQ(readImage(path("a.exr")).pixels, img.pixels);
+  fs::remove(path("a.exr"));
+  fs::remove(path("a.png"));
+  fs::remove(path("a.json"));
+
+  // A write that fails after others succeeded: none of the set appears, no temporary stays.
+  {
+    OutputSet set;
+    writeExr(path("b.exr"), img, {}, &set);
+    EXPECT_THROW(set.add(path("b.png"),
+                         [](const std::string& tmp) {
+                           writeText(tmp, "partial");
+                           throw std::runtime_error("writer failed");
+                         }),
+                 std::runtime_error);
+  }
+  EXPECT_TRUE(entries().empty());
+
+  // A rename that fails (the sidecar's path is a non-empty folder): the files renamed before
+  // it go too.
+  fs::create_directories(path("c.json") + "/inside");
+  {
+    OutputSet set;
+    writeExr(path("c.exr"), img, {}, &set);
+    writeJsonAtomic(path("c.json"), {{"done", true}}, &set);
+    EXPECT_THROW(set.commit(path("c.json")), Error);
+  }
+  EXPECT_EQ(entries(), std::vector<std::string>{"c.json"});  // the folder alone
+}
+
 TEST_F(ImageIoTest, WriteJsonAtomic) {
   const nlohmann::json value = {{"a", 1}, {"b", {1, 2, 3}}};
   writeJsonAtomic(path("x.json"), {{"old", true}});

@@ -9,16 +9,44 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include <functional>
+#include <mutex>
 #include <string>
+#include <vector>
 
 namespace voxcone {
 
-/// Write linear float RGB OpenEXR. Every top-level key of `metadata` becomes an EXR string
-/// attribute "voxcone:<key>" (its JSON dump). Throws ImageError.
-void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata);
+/// Files that appear together or not at all: add() writes each to a temporary beside its path
+/// (the naming of writeFileAtomic); commit() renames them, the one named `last` (the sidecar
+/// that marks a set complete) after the others. A failed write throws and leaves nothing; a set
+/// destroyed before commit() removes its temporaries; a rename that fails removes the files
+/// renamed before it. (A process killed between two renames leaves the set without its last
+/// file, which is what marks it incomplete; its temporaries are removed by the next write.)
+/// add() may be called from several threads.
+class OutputSet {
+public:
+  OutputSet() = default;
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+  ~OutputSet();
+  void add(const std::string& path, const std::function<void(const std::string& tmpPath)>& writer);
+  void commit(const std::string& last);
 
-/// Write an 8-bit sRGB PNG (linear values clamped to [0,1], sRGB OETF, rounded). Throws ImageError.
-void writePng(const std::string& path, const Image& image);
+private:
+  struct Entry {
+    std::string path, tmp;
+  };
+  std::vector<Entry> m_entries;
+  std::mutex m_mutex;
+  bool m_committed = false;
+};
+
+/// Write linear float RGB OpenEXR. Every top-level key of `metadata` becomes an EXR string
+/// attribute "voxcone:<key>" (its JSON dump). Atomic, or part of `set`. Throws ImageError.
+void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata, OutputSet* set = nullptr);
+
+/// Write an 8-bit sRGB PNG (linear values clamped to [0,1], sRGB OETF, rounded). Atomic, or
+/// part of `set`. Throws ImageError.
+void writePng(const std::string& path, const Image& image, OutputSet* set = nullptr);
 
 /// Write by extension: .exr (float, metadata) or .png (sRGB 8-bit). Throws ImageError.
 void writeImage(const std::string& path, const Image& image, const nlohmann::json& metadata);
@@ -27,8 +55,8 @@ void writeImage(const std::string& path, const Image& image, const nlohmann::jso
 /// Throws ImageError with a one-line message when the file is missing or unreadable.
 Image readImage(const std::string& path);
 
-/// Write pretty JSON (2-space indent) atomically. Throws Error.
-void writeJsonAtomic(const std::string& path, const nlohmann::json& value);
+/// Write pretty JSON (2-space indent) atomically, or as part of `set`. Throws Error.
+void writeJsonAtomic(const std::string& path, const nlohmann::json& value, OutputSet* set = nullptr);
 
 /// Call `writer(tmpPath)` to write a temporary file next to `path` (same extension), then
 /// rename it over `path`. The temporary is removed if `writer` throws. Throws Error.

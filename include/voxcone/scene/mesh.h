@@ -43,10 +43,14 @@ struct TriangleMesh {
 /// count type uchar/ushort/int (and their aliases); other properties and elements are skipped;
 /// polygons are fan-triangulated. Throws MeshError naming the file and what is wrong.
 TriangleMesh loadPly(const std::string& path);
+/// loadPly on the bytes of a file named `name` (fuzzing, tests).
+TriangleMesh parsePly(std::string bytes, const std::string& name);
 
 /// Load an OBJ file with tinyobjloader; its MTL library must exist (a missing .mtl is an error).
 /// Polygons are triangulated; per-face materials are kept. Throws MeshError.
 TriangleMesh loadObj(const std::string& path);
+/// loadObj on the text of a file named `name` and of the one material library it may use.
+TriangleMesh parseObj(const std::string& objText, const std::string& mtlText, const std::string& name);
 
 /// Load by extension (.ply or .obj, case-insensitive). Throws MeshError for anything else.
 TriangleMesh loadMesh(const std::string& path);
