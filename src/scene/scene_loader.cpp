@@ -312,8 +312,11 @@ private:
       if (maxComponent(glm::abs(v)) > float(kMaxReach))
         r.fail("coordinates beyond " + std::to_string(int64_t(kMaxReach)) + " are outside the range voxcone renders in float",
                key);
-    if (glm::length(target - pos) == 0.0f) r.fail("target equals position", "target");
-    if (glm::length(glm::cross(target - pos, up)) <= 1e-6f * glm::length(target - pos) * glm::length(up))
+    // In double: a scene scaled far below the range (1e-40) squared its float distances to zero
+    // and said "target equals position"; checkPrecision names the scale instead.
+    const DVec3 view = DVec3(target) - DVec3(pos), upD(up);
+    if (glm::length(view) == 0.0) r.fail("target equals position", "target");
+    if (glm::length(upD) == 0.0 || glm::length(glm::cross(view, upD)) <= 1e-6 * glm::length(view) * glm::length(upD))
       r.fail("up is parallel to the view direction", "up");
     m_scene.camera = Camera(pos, target, up, fov);
   }
