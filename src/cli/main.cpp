@@ -57,6 +57,8 @@ int main(int argc, char** argv) {
     // --help and --version print and succeed; every usage error is one line and exit 2 like
     // any other bad input (CLI11's own codes, 105-114, said nothing a script could use).
     if (e.get_exit_code() == 0) return app.exit(e);
+    // A command's own verdict (batch: a job failed; compare: over a threshold), already said.
+    if (dynamic_cast<const CLI::RuntimeError*>(&e)) return e.get_exit_code();
     std::fprintf(stderr, "voxcone: usage error: %s (see voxcone --help)\n", printable(e.what()).c_str());
     return 2;
   } catch (const voxcone::NotMetError& e) {

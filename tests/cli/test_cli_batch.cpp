@@ -150,13 +150,14 @@ TEST_F(Batch, AFailedJobIsRecordedAndTheRestRun) {
   nlohmann::json m = gridManifest();
   m["jobs"].push_back({{"name", "missing"}, {"scene", "no-such-scene.json"}});
   m["jobs"].push_back({{"name", "bad-option"}, {"method", "voxcone"}, {"options", {{"no_such_option", 1}}}});
+  m["jobs"].push_back({{"name", "bad-spp"}, {"method", "path"}, {"spp", 0}});
   const std::string manifest = writeManifest(m);
   EXPECT_EQ(run("batch " + manifest + " -j 2 -t 1 -q -o " + path("out")), 1);
   const nlohmann::json t = readJson(path("out/results.json"));
-  ASSERT_EQ(t["rows"].size(), 7u);
+  ASSERT_EQ(t["rows"].size(), 8u);
   int ok = 0;
   for (const nlohmann::json& r : t["rows"]) {
-    if (r["name"] == "missing" || r["name"] == "bad-option") {
+    if (r["name"] == "missing" || r["name"] == "bad-option" || r["name"] == "bad-spp") {
       EXPECT_EQ(r["status"], "failed");
       EXPECT_FALSE(r["error"].get<std::string>().empty());
       EXPECT_FALSE(fs::exists(path("out/" + r["name"].get<std::string>() + ".exr")));
@@ -166,6 +167,12 @@ TEST_F(Batch, AFailedJobIsRecordedAndTheRestRun) {
   }
   EXPECT_EQ(ok, 5);
   EXPECT_NE(t["rows"][2]["error"].get<std::string>().find("no_such_option"), std::string::npos) << t["rows"][2];
+  // The usage error itself, not CLI11's "Run with --help for more information." line.
+  std::string spp;
+  for (const nlohmann::json& r : t["rows"])
+    if (r["name"] == "bad-spp") spp = r["error"].get<std::string>();
+  EXPECT_NE(spp.find("--spp"), std::string::npos) << spp;
+  EXPECT_EQ(spp.find("Run with"), std::string::npos) << spp;
 }
 
 TEST_F(Batch, SkipExistingAndShards) {
