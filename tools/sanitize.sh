@@ -11,6 +11,7 @@ seconds=${1:-60}
 
 bash tools/setup.sh deps clang
 san="-fsanitize=address,undefined,float-cast-overflow -fno-sanitize=vptr -fno-sanitize-recover=all -fno-omit-frame-pointer"
+san="$san -fsanitize-ignorelist=$PWD/tools/sanitize-ignorelist.txt"
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_CXX_FLAGS="$san -fsanitize=fuzzer-no-link" -DCMAKE_EXE_LINKER_FLAGS="$san" \
   -DVOXCONE_BUILD_TESTS=ON -DVOXCONE_BUILD_FUZZERS=ON >/dev/null

@@ -14,6 +14,8 @@
 
 #include <array>
 #include <charconv>
+#include <cmath>
+#include <cstdlib>
 #include <cerrno>
 #include <csignal>
 #include <cstring>
@@ -26,6 +28,18 @@ namespace voxcone {
 const CLI::Validator& nonEmpty() {
   static const CLI::Validator v([](std::string& s) { return s.empty() ? std::string("must not be empty") : std::string(); },
                                 "NONEMPTY");
+  return v;
+}
+
+const CLI::Validator& positiveNumber() {
+  static const CLI::Validator v(
+      [](std::string& s) {
+        char* end = nullptr;
+        const double d = std::strtod(s.c_str(), &end);
+        const bool ok = !s.empty() && end == s.c_str() + s.size() && std::isfinite(d) && d > 0.0;
+        return ok ? std::string() : "expects a positive number, got '" + s.substr(0, 40) + "'";
+      },
+      "POSITIVE");
   return v;
 }
 

@@ -17,6 +17,8 @@ std::string shellQuote(const std::string& s);
 /// CLI11 check: the value must not be empty (an empty --method or -o would otherwise mean
 /// "not given" and silently fall back to a default).
 const CLI::Validator& nonEmpty();
+/// CLI11 check: a finite number above zero (CLI::PositiveNumber printed DBL_MAX's 309 digits).
+const CLI::Validator& positiveNumber();
 
 /// A seed: a decimal integer in [0, 2^64 - 1]; anything else (a sign, a fraction, more than 64
 /// bits) is a SettingsError naming `option`, never clamped.

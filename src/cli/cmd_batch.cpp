@@ -491,7 +491,7 @@ void addBatchCommand(CLI::App& app) {
   cmd->add_flag("--skip-existing", o->skipExisting, "Keep jobs whose outputs exist (resume an interrupted batch)");
   cmd->add_option("--shard", o->shard, "Run the jobs whose index % N == I (I/N), for spreading over machines");
   cmd->add_option("--memory-budget-mb", o->memoryBudgetMb, "Heap limit per job; a job over it fails and the batch goes on")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   cmd->add_flag("--dry-run", o->dryRun, "Print the expanded jobs (name and settings) and exit");
   cmd->add_flag("-q,--quiet", o->quiet, "No per-job lines");
   cmd->callback([o] { runBatch(*o); });

@@ -2,6 +2,7 @@
 /// `voxcone compare TEST REF`: image metrics of a test image against a reference, with optional
 /// pass/fail thresholds (exit code 1) for regression scripts.
 
+#include "cli_util.h"
 #include "commands.h"
 
 #include "voxcone/core/error.h"
@@ -150,7 +151,7 @@ void addCompareCommand(CLI::App& app) {
   sub->add_option("--error-scale", args->errorScale,
                   "Relative squared error at the top of the error image's ramp (default: its 99th percentile); "
                   "give two images the same scale to compare them")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->type_name("X");
   sub->add_option("--regions", args->regions,
                   "Also print an N x N grid of cells: each cell's luminance ratio test/reference and its share of "

@@ -275,10 +275,10 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--target-error", o->targetError,
                   "voxcone: render averaged passes (of --spp, default 4) until the predicted relMSE against the true "
                   "image, from the passes' spread and path-traced control pixels, is at most this")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   cmd->add_option("--time-budget", o->timeBudget,
                   "voxcone: render averaged passes (of --spp, default 4) for this many seconds (load included)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   cmd->add_option("--field", o->field,
                   "voxcone: render with this field (.vdb from 'voxcone voxelize -o') instead of tracing photons and "
                   "voxelizing; its levels and photons are the field's")

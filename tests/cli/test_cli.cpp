@@ -110,6 +110,9 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --spp lots -o " + (d / "m").string(),
       "voxelize",
       "voxelize " + scenes + "cornell-box.json --level 14",
+      // CLI::PositiveNumber printed DBL_MAX's 309 digits as the bound.
+      "render " + scenes + "cornell-box.json -q --target-error -1 -o " + (d / "n").string(),
+      "render " + scenes + "cornell-box.json -q --time-budget abc -o " + (d / "o").string(),
       "study",
       "batch",
   };
@@ -120,6 +123,7 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
     // One line of error, printable: no control bytes and none of a binary file's bytes echoed
     // back.
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;
+    EXPECT_LT(r.err.size(), 300u) << args << ": " << r.err;
     for (char c : r.err)
       EXPECT_TRUE(c == '\n' || (c >= 32 && c < 127)) << args << ": byte " << int(static_cast<unsigned char>(c));
   }
