@@ -53,11 +53,12 @@ TEST(Precision, ScenesBeyondTheRangeAreRefusedWithTheReason) {
     const char* expect;
   };
   // Measured before the check: scaled 1e7 the image mean was 0.07 instead of 0.12, 1e8 black;
-  // 1e-8 1.4% off; moved 18,000 sides away 13% off; scaled 1e17 "up is parallel", 1e-40
+  // 1e-8 1.4% off; moved 18,000 sides away 13% off; scaled 1e17 and 1e36 "up is parallel", 1e-40
   // "target equals position" (its float distances squared to zero).
   for (const Case& c : {Case{1e-7, 0.0, "units across"}, Case{1e7, 0.0, "units across"}, Case{1e8, 0.0, "units across"},
                         Case{1e-40, 0.0, "units across"}, Case{1.0, 1e7, "from the origin"},
-                        Case{1e17, 0.0, "camera.position: coordinates beyond"}}) {
+                        Case{1e17, 0.0, "camera.position: coordinates beyond"},
+                        Case{1e36, 0.0, "camera.position: coordinates beyond"}}) {
     try {
       transformedCornellBox(c.scale, c.offset);
       ADD_FAILURE() << "accepted scale " << c.scale << " offset " << c.offset;
