@@ -32,6 +32,7 @@ struct VoxelizeOptions {
   bool json = false;
   bool quiet = false;
   double memoryBudgetMb = -1.0;  // -1: the available memory; 0: no budget
+  bool measureQuantization = false;
 };
 
 void runVoxelize(const VoxelizeOptions& o) {
@@ -77,6 +78,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   vs.coarsestLevel = o.coarsest;
   vs.causticLevel = causticLevel;
   vs.memoryBudgetBytes = VoxelSettings::budgetFromMegabytes(o.memoryBudgetMb);
+  vs.measureQuantization = o.measureQuantization;
   // The estimate the budget is checked against, beside what the field turns out to take.
   const std::vector<FieldEstimate> estimates = VoxelField::estimate(scene, vs);
   t.reset();
@@ -113,6 +115,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   j["estimate"] = {{"voxels", est.voxels}, {"field_bytes", est.fieldBytes}, {"peak_bytes", est.peakBytes},
                    {"probe_level", est.probeLevel}};
   j["total_bytes"] = field.memoryBytes();
+  if (o.measureQuantization) j["quantization"] = field.quantizationJson();
 
   if (!o.output.empty()) {
     t.reset();
@@ -138,6 +141,16 @@ void runVoxelize(const VoxelizeOptions& o) {
               double(field.memoryBytes()) / (1024.0 * 1024.0), (unsigned long long)maps.stats.storedGlobal,
               (unsigned long long)maps.stats.storedCaustic, maps.stats.seconds, voxelizeSec, injectSec, mipSec,
               double(peakRssBytes()) / (1024.0 * 1024.0));
+  if (o.measureQuantization) {
+    const nlohmann::json q = field.quantizationJson();
+    std::printf("quantization: coverage %.2g (max %.2g) relative, normal %.2f (max %.2f) degrees, radiance %.2g (max "
+                "%.2g) relative, axes %.2g (max %.2g), diffuse %.2g (max %.2g)\n",
+                q["coverage_relative"]["mean"].get<double>(), q["coverage_relative"]["max"].get<double>(),
+                q["normal_degrees"]["mean"].get<double>(), q["normal_degrees"]["max"].get<double>(),
+                q["radiance_relative"]["mean"].get<double>(), q["radiance_relative"]["max"].get<double>(),
+                q["axes_absolute"]["mean"].get<double>(), q["axes_absolute"]["max"].get<double>(),
+                q["diffuse_absolute"]["mean"].get<double>(), q["diffuse_absolute"]["max"].get<double>());
+  }
   if (!o.output.empty()) std::printf("wrote %s\n", o.output.c_str());
 }
 
@@ -164,6 +177,9 @@ void addVoxelizeCommand(CLI::App& app) {
                   "Refuse a level whose estimated memory exceeds this many MB, before allocating (0: no budget; "
                   "default: the machine's available memory)")
       ->check(CLI::Range(0.0, 1e12));
+  cmd->add_flag("--measure-quantization", o->measureQuantization,
+                "Measure the error each compact encoding adds (in the --json output and the table's last line; "
+                "slows voxelizing a little)");
   cmd->add_flag("--json", o->json, "Print the table as JSON on stdout");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runVoxelize(*o); });

@@ -320,11 +320,37 @@ constexpr int kDenseBrickLevel = 8;
 /// cornell-box at level 6: cone gathers 21% faster, the same image to 4 digits of PSNR.
 constexpr int kConeTableLevel = 7;
 
+/// The error the compact encodings add, per attribute (VoxelSettings::measureQuantization):
+/// the largest and the mean over the voxels encoded.
+struct QuantizationError {
+  double maxError = 0.0, sum = 0.0;
+  uint64_t count = 0;
+  void add(double e) {
+    maxError = std::max(maxError, e);
+    sum += e;
+    ++count;
+  }
+  nlohmann::json json() const { return {{"max", maxError}, {"mean", count ? sum / double(count) : 0.0}, {"voxels", count}}; }
+};
+struct FieldQuantization {
+  QuantizationError coverage;  ///< relative (half)
+  QuantizationError normal;    ///< degrees (octahedral 2 x 8 bit)
+  QuantizationError radiance;  ///< relative to the largest channel (RGB9E5), lit sides only
+  QuantizationError axes;      ///< absolute (unorm8)
+  QuantizationError diffuse;   ///< absolute (unorm8)
+  /// The error of encoding x as RGB9E5, relative to its largest channel.
+  void addRadiance(const Vec3& x, uint32_t code) {
+    const float m = maxComponent(x);
+    if (m > 0.0f) radiance.add(double(maxComponent(glm::abs(decodeRgb9e5(code) - x))) / double(m));
+  }
+};
+
 /// Builds a level from runs of full-precision voxels in key order (VoxelSink), encoding each
-/// run as it comes: the level never exists in full precision.
+/// run as it comes: the level never exists in full precision. With `quant`, the error of every
+/// encoding is measured into it.
 class LevelBuilder {
 public:
-  LevelBuilder(int level, double voxelSize) {
+  LevelBuilder(int level, double voxelSize, FieldQuantization* quant = nullptr) : m_quant(quant) {
     m_out.level = level;
     m_out.voxelSize = voxelSize;
     m_out.invVoxelSize = float(1.0 / voxelSize);
@@ -365,6 +391,7 @@ public:
       }
       if (!a.axisFraction.empty())
         for (int c = 0; c < 3; ++c) o.axisFraction.push_back(encodeUnorm8(a.axisFraction[v][c]));
+      if (m_quant) measure(a, v);
     }
   }
 
@@ -399,6 +426,26 @@ public:
   }
 
 private:
+  /// The error of voxel v's encodings (the ones append just stored).
+  void measure(const VoxelArrays& a, size_t v) {
+    const Level& o = m_out;
+    if (a.coverage[v] > 0.0f)
+      m_quant->coverage.add(std::abs(double(float(o.coverage.back())) - double(a.coverage[v])) / double(a.coverage[v]));
+    const float cosine = std::clamp(glm::dot(decodeNormal(o.normal.back()), a.normal[v]), -1.0f, 1.0f);
+    m_quant->normal.add(double(std::acos(cosine)) * 180.0 / kPiD);
+    if (!a.diffuse.empty()) m_quant->diffuse.add(std::abs(double(decodeUnorm8(m_diffuse.back())) - double(a.diffuse[v])));
+    if (!a.radiance.empty()) {
+      m_quant->addRadiance(a.radiance[v], m_radiance[0].back());
+      m_quant->addRadiance(a.radianceBack[v], m_radiance[1].back());
+    }
+    if (!a.axisFraction.empty())
+      for (int c = 0; c < 3; ++c)
+        m_quant->axes.add(std::abs(double(decodeUnorm8(o.axisFraction[o.axisFraction.size() - 3 + size_t(c)])) -
+                                   double(a.axisFraction[v][c])));
+  }
+
+  FieldQuantization* m_quant = nullptr;
+
   /// The brick just completed: its diffuse fractions and each side's radiance are kept only
   /// when some voxel of it needs them (SparseBricks).
   void flushBrick() {
@@ -528,7 +575,7 @@ void reduceShares(const Level& child, const std::vector<ChildShare>& shares, Vox
 /// children lie in the 2^3 child superbricks below it (box) or the 4^3 around those (Gaussian);
 /// each parent's shares are summed in child index order, so the level is the same at any
 /// thread count. Parent superbricks go in parallel batches appended in key order.
-Level restrictLevel(const Level& child, MipFilter filter) {
+Level restrictLevel(const Level& child, MipFilter filter, FieldQuantization* quant) {
   const uint32_t parentRes = std::max(1u, child.resolution >> 1);
   const int32_t childSupers = int32_t(std::max(1u, child.resolution >> voxel::kSuperLog2));
   // The parent superbricks with a child: those above each child superbrick (and beside, for
@@ -550,7 +597,7 @@ Level restrictLevel(const Level& child, MipFilter filter) {
   tbb::parallel_sort(parents.begin(), parents.end());
   parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
 
-  LevelBuilder builder(child.level - 1, child.voxelSize * 2.0);
+  LevelBuilder builder(child.level - 1, child.voxelSize * 2.0, quant);
   constexpr size_t kBatch = 256;
   std::vector<VoxelArrays> batch(kBatch);
   for (size_t first = 0; first < parents.size(); first += kBatch) {
@@ -703,6 +750,9 @@ struct VoxelField::Impl {
   DVec3 injected{0.0}, dropped{0.0};
   uint64_t globalPhotons = 0, causticPhotons = 0;
   uint64_t sceneHash = 0;     ///< fieldSceneHash of the scene voxelized
+  FieldQuantization quant;    ///< the main grid's encoding errors (settings.measureQuantization)
+
+  FieldQuantization* quantPtr() { return settings.measureQuantization ? &quant : nullptr; }
 
   double voxelSize(int level) const { return extent / double(uint64_t(1) << level); }
   void inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut);
@@ -895,6 +945,16 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
         for (uint32_t r = 0; r < n; ++r) out.values[size_t(f.base[b]) + r] = radianceOf(f, b, r);
       });
     }
+    if (FieldQuantization* q = &grid == &main ? quantPtr() : nullptr)
+      for (uint32_t b = 0; b < lv.brickMask.size() && !f.values.empty(); ++b) {
+        if (f.base[b] == SparseBricks<Vec3>::kNone) continue;
+        for (uint32_t r = 0; r < uint32_t(__builtin_popcountll(lv.brickMask[b])); ++r) {
+          const double area = double(lv.coverage[size_t(lv.brickBase[b]) + r]) * voxelArea;
+          if (area > 0.0)
+            q->addRadiance(Vec3(DVec3(f.values[size_t(f.base[b]) + r]) * (1.0 / (kPiD * area))),
+                           out.values[size_t(f.base[b]) + r]);
+        }
+      }
     f = SparseBricks<Vec3>();
   }
   lv.lit = true;
@@ -1105,7 +1165,7 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
   auto build = [&](Grid& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
     Timer timer;
     const double vs = f.voxelSize(level);
-    LevelBuilder builder(level, vs);
+    LevelBuilder builder(level, vs, countArea ? f.quantPtr() : nullptr);
     double area = 0.0;
     voxel::voxelizeTriangles(
         scene, f.origin, vs, uint32_t(1) << level, progress,
@@ -1181,7 +1241,7 @@ void VoxelField::buildMips(Progress* progress) {
     while (grid->levels.back().level > f.settings.coarsestLevel) {
       if (progress && progress->cancelled()) throw CancelledError();
       Timer t;
-      Level parent = restrictLevel(grid->levels.back(), f.settings.mipFilter);
+      Level parent = restrictLevel(grid->levels.back(), f.settings.mipFilter, f.quantPtr());
       parent.buildSeconds = t.seconds();
       grid->levels.push_back(std::move(parent));
       if (progress) progress->advance(1);
@@ -1307,6 +1367,13 @@ std::vector<VoxelGridStats> VoxelField::stats() const {
     rows.push_back(s);
   }
   return rows;
+}
+
+nlohmann::json VoxelField::quantizationJson() const {
+  const FieldQuantization& q = m_impl->quant;
+  if (!m_impl->settings.measureQuantization) return nullptr;
+  return {{"coverage_relative", q.coverage.json()}, {"normal_degrees", q.normal.json()},
+          {"radiance_relative", q.radiance.json()}, {"axes_absolute", q.axes.json()}, {"diffuse_absolute", q.diffuse.json()}};
 }
 
 uint64_t VoxelField::memoryBytes() const {

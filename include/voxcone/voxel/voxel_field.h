@@ -71,6 +71,9 @@ struct VoxelSettings {
   /// level whose estimated peak exceeds it is refused with an error naming the finest level
   /// that fits. kAvailableMemory: the machine's available memory at that moment; kNoBudget: no check.
   uint64_t memoryBudgetBytes = kAvailableMemory;
+  /// Measure the error each compact encoding adds against the full-precision values it
+  /// encodes (VoxelField::quantizationJson; voxelize --json).
+  bool measureQuantization = false;
   static constexpr uint64_t kAvailableMemory = 0;
   static constexpr uint64_t kNoBudget = ~uint64_t(0);
   /// memoryBudgetBytes of a budget in MB (10^6 bytes) as users give it: negative (not given)
@@ -217,6 +220,10 @@ public:
 
   /// One row per grid and level.
   std::vector<VoxelGridStats> stats() const;
+  /// With settings.measureQuantization: per attribute of the main grid the largest and the
+  /// mean error its encoding added (coverage and radiance relative, normals in degrees, axis
+  /// and diffuse fractions absolute); null without.
+  nlohmann::json quantizationJson() const;
   /// Bytes in memory of everything the field holds.
   uint64_t memoryBytes() const;
 
