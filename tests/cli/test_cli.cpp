@@ -156,6 +156,11 @@ TEST(Cli, OutputsThatCannotBeWrittenFailBeforeTheRender) {
     EXPECT_NE(r.err.find(out.back() == '/' ? "names a folder" : "is a directory"), std::string::npos) << r.err;
   }
   EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 1);  // x.png/ alone
+  // A folder nothing can be written into (a read-only one refuses only other users than root,
+  // which the tests may run as; /proc refuses everyone).
+  const RunResult r = run("render " + scene + " -q --res 8x8 --spp 1 -o /proc/voxcone-x");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("cannot write into /proc"), std::string::npos) << r.err;
 }
 
 TEST(Cli, InfoPrintsHbvhStatistics) {
