@@ -928,7 +928,7 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
   const double voxelArea = lv.voxelSize * lv.voxelSize;
   const auto radianceOf = [&](const SparseBricks<Vec3>& f, uint32_t brick, uint32_t rank) {
     const double area = double(lv.coverage[size_t(lv.brickBase[brick]) + rank]) * voxelArea;
-    return area > 0.0 ? encodeRgb9e5(Vec3(DVec3(f.values[size_t(f.base[brick]) + rank]) * (1.0 / (kPiD * area)))) : 0u;
+    return area > 0.0 ? Vec3(DVec3(f.values[size_t(f.base[brick]) + rank]) * (1.0 / (kPiD * area))) : Vec3(0.0f);
   };
   lv.coneTable.clear();  // stale until buildConeTable runs again
   // Each side in the flux's own sparse layout, the bricks no photon reached left out.
@@ -942,18 +942,14 @@ void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* p
       tbb::parallel_for(uint32_t(0), uint32_t(lv.brickMask.size()), [&](uint32_t b) {
         if (f.base[b] == SparseBricks<Vec3>::kNone) return;
         const uint32_t n = uint32_t(__builtin_popcountll(lv.brickMask[b]));
-        for (uint32_t r = 0; r < n; ++r) out.values[size_t(f.base[b]) + r] = radianceOf(f, b, r);
+        for (uint32_t r = 0; r < n; ++r) out.values[size_t(f.base[b]) + r] = encodeRgb9e5(radianceOf(f, b, r));
       });
     }
     if (FieldQuantization* q = &grid == &main ? quantPtr() : nullptr)
       for (uint32_t b = 0; b < lv.brickMask.size() && !f.values.empty(); ++b) {
         if (f.base[b] == SparseBricks<Vec3>::kNone) continue;
-        for (uint32_t r = 0; r < uint32_t(__builtin_popcountll(lv.brickMask[b])); ++r) {
-          const double area = double(lv.coverage[size_t(lv.brickBase[b]) + r]) * voxelArea;
-          if (area > 0.0)
-            q->addRadiance(Vec3(DVec3(f.values[size_t(f.base[b]) + r]) * (1.0 / (kPiD * area))),
-                           out.values[size_t(f.base[b]) + r]);
-        }
+        for (uint32_t r = 0; r < uint32_t(__builtin_popcountll(lv.brickMask[b])); ++r)
+          q->addRadiance(radianceOf(f, b, r), out.values[size_t(f.base[b]) + r]);
       }
     f = SparseBricks<Vec3>();
   }

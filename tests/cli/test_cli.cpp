@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -24,7 +25,9 @@ struct RunResult {
 };
 
 RunResult run(const std::string& args) {
-  const std::string errFile = ::testing::TempDir() + "/cli_stderr.txt";
+  // One file per test process: ctest runs the tests side by side, and a shared name mixed
+  // their messages.
+  const std::string errFile = ::testing::TempDir() + "/cli_stderr-" + std::to_string(::getpid()) + ".txt";
   const std::string cmd = std::string(VOXCONE_CLI_PATH) + " " + args + " >/dev/null 2>" + errFile;
   const int status = std::system(cmd.c_str());
   std::ifstream f(errFile);

@@ -52,7 +52,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   out.fieldPath = r.text("field", "");
   if (!out.fieldPath.empty())
     for (const char* fixed : {"level", "coarsest_level", "caustic_level", "kernel_sigma", "mip_filter", "photons",
-                              "caustic_photons", "memory_budget_mb"})
+                              "caustic_photons"})
       if (r.has(fixed))
         throw SettingsError(std::string("voxcone.") + fixed + ": the field (voxcone.field) fixes it; give one or the other");
 

@@ -88,7 +88,12 @@
 ///    through thin walls (it leaks like unmitigated marching): tests show both;
 ///  - `view`: "full" (default), or one term alone for error studies: "direct" (emission and
 ///    shadow rays), "indirect" (cones), "caustic" (caustic grid), "field" (the main grid's
-///    radiance at the first non-delta hit: what cones see there).
+///    radiance at the first non-delta hit: what cones see there);
+///  - `field`: a .vdb from `voxcone voxelize -o` to render with instead of tracing photons and
+///    voxelizing (VoxelField::read; it fixes level, coarsest_level, caustic_level,
+///    kernel_sigma, mip_filter and the photons, which may not be given with it);
+///  - `memory_budget_mb`: refuse a level whose estimated memory exceeds it (default the
+///    machine's available memory, 0 none; VoxelSettings::memoryBudgetBytes).
 /// Deterministic: the photon pass and the field are identical at any thread count, and li()
 /// draws only from the pixel's stream.
 
