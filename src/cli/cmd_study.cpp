@@ -230,9 +230,19 @@ double onFront(const std::vector<std::pair<double, double>>& front, double x) {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-void runSweepStudy(const SweepOptions& o) {
-  if (!fs::exists(o.scenePath)) throw SettingsError("scene file not found: " + o.scenePath);
-  if (!fs::exists(o.referencePath)) throw SettingsError("reference image not found: " + o.referencePath);
+void runSweepStudy(const SweepOptions& given) {
+  if (!fs::exists(given.scenePath)) throw SettingsError("scene file not found: " + given.scenePath);
+  if (!fs::exists(given.referencePath)) throw SettingsError("reference image not found: " + given.referencePath);
+  // Every job renders at the reference's size: --res defaults to it, and another is an error
+  // before any job runs (rendered at 256x256 against a 64x64 reference, every job's metrics
+  // failed after the whole study had run).
+  SweepOptions o = given;
+  const Image reference = readImage(o.referencePath);
+  const std::string size = std::to_string(reference.width) + "x" + std::to_string(reference.height);
+  if (o.resolution.empty()) o.resolution = size;
+  else if (o.resolution != size)
+    throw SettingsError("--res " + o.resolution + " differs from the reference's " + size + " (" + o.referencePath +
+                        "): the metrics compare images of one size");
   // The renders are a batch (resumable: finished jobs are kept); failed jobs are left out.
   const nlohmann::json results = runStudyBatch(sweepManifest(o), o.outDir, o.jobsInFlight, o.threads);
 

@@ -103,8 +103,9 @@ TEST_F(StudySweeps, QuickPhotonsAndLevelsStudiesPlotTheirRows) {
   // (study, x key, rows: pm and voxcone at 1000 and 4000 photons; voxcone at levels 3, 4, 5)
   for (const auto& [kind, x, expected] : {std::tuple<std::string, std::string, size_t>{"photons", "photons", 4},
                                           {"levels", "level", 3}}) {
-    const std::string cmd = cli + " study " + kind + " " + scene + " --reference " + path("ref.exr") +
-                            " --quick --res 16x16 -j 2 -t 1 -o " + path(kind) + " > /dev/null 2>&1";
+    // levels without --res: the reference's size is the default.
+    const std::string cmd = cli + " study " + kind + " " + scene + " --reference " + path("ref.exr") + " --quick" +
+                            (kind == "levels" ? "" : " --res 16x16") + " -j 2 -t 1 -o " + path(kind) + " > /dev/null 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << kind;
     std::ifstream f(path(kind + "/" + kind + ".json"));
     const nlohmann::json study = nlohmann::json::parse(f);
@@ -123,6 +124,11 @@ TEST_F(StudySweeps, QuickPhotonsAndLevelsStudiesPlotTheirRows) {
       EXPECT_FALSE(r[x].is_null()) << kind << " " << r["name"];  // taken from the render's own settings
     }
   }
+  // Another size than the reference's: refused before any job runs, nothing rendered.
+  const std::string bad = cli + " study levels " + scene + " --reference " + path("ref.exr") +
+                          " --quick --res 32x32 -t 1 -o " + path("mismatch") + " > /dev/null 2>&1";
+  EXPECT_EQ(std::system(bad.c_str()), 2 << 8);
+  EXPECT_FALSE(std::filesystem::exists(path("mismatch/runs")));
 }
 
 }  // namespace
