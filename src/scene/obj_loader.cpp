@@ -38,6 +38,13 @@ Vec3 toVec3(const tinyobj::real_t* v) { return Vec3(float(v[0]), float(v[1]), fl
 
 namespace {
 TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std::string& path);
+/// Polygons triangulated, no vertex colours.
+tinyobj::ObjReaderConfig objConfig() {
+  tinyobj::ObjReaderConfig config;
+  config.triangulate = true;
+  config.vertex_color = false;
+  return config;
+}
 }  // namespace
 
 TriangleMesh loadObj(const std::string& path) {
@@ -45,20 +52,14 @@ TriangleMesh loadObj(const std::string& path) {
   if (!std::filesystem::exists(path, ec)) throw MeshError(path, "cannot open file: no such file");
   if (std::filesystem::is_directory(path, ec)) throw MeshError(path, "cannot open file: is a directory");
 
-  tinyobj::ObjReaderConfig config;
-  config.triangulate = true;
-  config.vertex_color = false;
   tinyobj::ObjReader reader;
-  const bool ok = reader.ParseFromFile(path, config);
+  const bool ok = reader.ParseFromFile(path, objConfig());
   return meshFromReader(reader, ok, path);
 }
 
 TriangleMesh parseObj(const std::string& objText, const std::string& mtlText, const std::string& name) {
-  tinyobj::ObjReaderConfig config;
-  config.triangulate = true;
-  config.vertex_color = false;
   tinyobj::ObjReader reader;
-  const bool ok = reader.ParseFromString(objText, mtlText, config);
+  const bool ok = reader.ParseFromString(objText, mtlText, objConfig());
   return meshFromReader(reader, ok, name);
 }
 

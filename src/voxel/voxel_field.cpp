@@ -261,12 +261,7 @@ struct Level {
   /// Visit the voxels of superbrick `s` at superbrick coordinate (si, sj, sk): f(ref, i, j, k),
   /// in key order.
   template <typename F> void forEachVoxelOf(uint32_t s, uint32_t si, uint32_t sj, uint32_t sk, F&& f) const {
-    uint64_t bricks = superMask[s];
-    uint32_t b = superBase[s];
-    while (bricks) {
-      const uint32_t bb = uint32_t(__builtin_ctzll(bricks));
-      bricks &= bricks - 1;
-      const uint32_t bi = (si << 2) | (bb >> 4), bj = (sj << 2) | ((bb >> 2) & 3u), bk = (sk << 2) | (bb & 3u);
+    forEachBrickOf(s, si, sj, sk, [&](uint32_t b, uint32_t bi, uint32_t bj, uint32_t bk) {
       uint64_t mask = brickMask[b];
       VoxelRef r{brickBase[b], b, 0};
       while (mask) {
@@ -276,7 +271,15 @@ struct Level {
         ++r.index;
         ++r.rank;
       }
-      ++b;
+    });
+  }
+  /// Visit the bricks of superbrick `s` at (si, sj, sk): f(brick index, bi, bj, bk), in key order.
+  template <typename F> void forEachBrickOf(uint32_t s, uint32_t si, uint32_t sj, uint32_t sk, F&& f) const {
+    uint64_t bricks = superMask[s];
+    for (uint32_t b = superBase[s]; bricks; ++b) {
+      const uint32_t bb = uint32_t(__builtin_ctzll(bricks));
+      bricks &= bricks - 1;
+      f(b, (si << 2) | (bb >> 4), (sj << 2) | ((bb >> 2) & 3u), (sk << 2) | (bb & 3u));
     }
   }
   /// Visit every voxel: f(ref, i, j, k), superbricks in tree order (callers sort when they need
@@ -410,15 +413,10 @@ public:
       o.denseBricks.assign(std::max<size_t>(1, side * side * side), -1);
       for (auto it = o.tree->cbeginValueOn(); it; ++it) {
         const openvdb::Coord c = it.getCoord();
-        uint64_t bricks = o.superMask[*it];
-        uint32_t b = o.superBase[*it];
-        while (bricks) {
-          const uint32_t bb = uint32_t(__builtin_ctzll(bricks));
-          bricks &= bricks - 1;
-          const size_t bi = (size_t(c.x()) << 2) | (bb >> 4), bj = (size_t(c.y()) << 2) | ((bb >> 2) & 3u),
-                       bk = (size_t(c.z()) << 2) | (bb & 3u);
-          o.denseBricks[(bk * side + bj) * side + bi] = int32_t(b++);
-        }
+        o.forEachBrickOf(*it, uint32_t(c.x()), uint32_t(c.y()), uint32_t(c.z()),
+                         [&](uint32_t b, uint32_t bi, uint32_t bj, uint32_t bk) {
+                           o.denseBricks[(size_t(bk) * side + bj) * side + bi] = int32_t(b);
+                         });
       }
     }
     m_acc.reset();

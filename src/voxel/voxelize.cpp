@@ -53,6 +53,24 @@ int clipAgainst(const DVec3* in, int n, DVec3* out, int axis, double bound, doub
   return m;
 }
 
+/// Voxel range of triangle `t` (inclusive, clamped to the grid): the floor of its index-space
+/// bounds, so that a surface lying exactly on a voxel face belongs to the voxel above it only.
+/// Returns the number of voxels in the range.
+int64_t triangleVoxelRange(const Scene& scene, size_t t, const DVec3& origin, double invVoxel, int32_t maxIndex,
+                           int32_t lo[3], int32_t hi[3]) {
+  const UVec3& tv = scene.triangles[t];
+  const DVec3 p[3] = {(DVec3(scene.positions[tv.x]) - origin) * invVoxel, (DVec3(scene.positions[tv.y]) - origin) * invVoxel,
+                      (DVec3(scene.positions[tv.z]) - origin) * invVoxel};
+  int64_t count = 1;
+  for (int a = 0; a < 3; ++a) {
+    const double mn = std::min(p[0][a], std::min(p[1][a], p[2][a])), mx = std::max(p[0][a], std::max(p[1][a], p[2][a]));
+    lo[a] = std::clamp(int32_t(std::floor(mn)), 0, maxIndex);
+    hi[a] = std::clamp(int32_t(std::floor(mx)), 0, maxIndex);
+    count *= int64_t(hi[a] - lo[a] + 1);
+  }
+  return count;
+}
+
 }  // namespace
 
 bool triangleBoxOverlap(const DVec3& center, double h, const DVec3 tri[3]) {
@@ -109,18 +127,10 @@ uint64_t voxelBoxBound(const Scene& scene, const DVec3& origin, double voxelSize
   return tbb::parallel_reduce(
       tbb::blocked_range<size_t>(0, scene.triangleCount(), 16384), uint64_t(0),
       [&](const tbb::blocked_range<size_t>& r, uint64_t sum) {
-        for (size_t t = r.begin(); t != r.end(); ++t) {
-          if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
-          const UVec3& tv = scene.triangles[t];
-          const DVec3 p[3] = {(DVec3(scene.positions[tv.x]) - origin) * invVoxel, (DVec3(scene.positions[tv.y]) - origin) * invVoxel,
-                              (DVec3(scene.positions[tv.z]) - origin) * invVoxel};
-          uint64_t count = 1;
-          for (int a = 0; a < 3; ++a) {
-            const double mn = std::min(p[0][a], std::min(p[1][a], p[2][a])), mx = std::max(p[0][a], std::max(p[1][a], p[2][a]));
-            count *= uint64_t(std::clamp(int32_t(std::floor(mx)), 0, maxIndex) - std::clamp(int32_t(std::floor(mn)), 0, maxIndex) + 1);
-          }
-          sum += count;
-        }
+        int32_t lo[3], hi[3];
+        for (size_t t = r.begin(); t != r.end(); ++t)
+          if (scene.materials[scene.triMaterial[t]].type != MaterialType::Dielectric)
+            sum += uint64_t(triangleVoxelRange(scene, t, origin, invVoxel, maxIndex, lo, hi));
         return sum;
       },
       std::plus<uint64_t>());
@@ -176,16 +186,8 @@ size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSi
     for (size_t t = chunk * kItemChunk; t < end; ++t) {
       // Smooth glass is not in the field (VoxelField::voxelize): cones see through it.
       if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
-      const UVec3& tv = scene.triangles[t];
-      const DVec3 p0 = indexPos(tv.x), p1 = indexPos(tv.y), p2 = indexPos(tv.z);
       WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}, false};
-      int64_t count = 1;
-      for (int a = 0; a < 3; ++a) {
-        const double mn = std::min(p0[a], std::min(p1[a], p2[a])), mx = std::max(p0[a], std::max(p1[a], p2[a]));
-        item.lo[a] = std::clamp(int32_t(std::floor(mn)), 0, maxIndex);
-        item.hi[a] = std::clamp(int32_t(std::floor(mx)), 0, maxIndex);
-        count *= int64_t(item.hi[a] - item.lo[a] + 1);
-      }
+      const int64_t count = triangleVoxelRange(scene, t, origin, invVoxel, maxIndex, item.lo, item.hi);
       if (!reachesListed(item.lo, item.hi)) continue;
       item.single = count == 1;
       if (count <= kSlabVoxels) {

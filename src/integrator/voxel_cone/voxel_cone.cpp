@@ -56,9 +56,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     m_stats["field_read_seconds"] = total.seconds();
     m_stats["prepare_seconds"] = total.seconds();
     m_stats["peak_rss_bytes_after_prepare"] = peakRssBytes();
-    m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
-    const int causticLevel = m_field.settings().causticLevel;
-    m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
+    startTracer();
     return;
   }
   const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
@@ -83,6 +81,10 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   peakAfter["mips"] = peakRssBytes();
   m_stats["peak_rss_bytes_after"] = peakAfter;
   m_stats["prepare_seconds"] = total.seconds();
+  startTracer();
+}
+
+void VoxelConeIntegrator::startTracer() {
   m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
   const int causticLevel = m_field.settings().causticLevel;
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();

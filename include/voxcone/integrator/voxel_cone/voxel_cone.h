@@ -139,6 +139,8 @@ private:
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
+  /// The cone tracer over the field just built or read, and the caustic voxel size.
+  void startTracer();
   /// li, with the first hit's indirect light in `split` when it is given.
   Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
 
