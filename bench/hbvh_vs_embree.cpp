@@ -364,7 +364,7 @@ int run(const Options& opt) {
   const HbvhStats& hs = bvh->stats();
 
   // Embree device with the default configuration and a memory monitor.
-  RTCDevice device = rtcNewDevice(nullptr);
+  RTCDevice device = rtcNewDevice(std::getenv("VOXCONE_EMBREE_CONFIG"));
   if (!device) throw Error("rtcNewDevice failed");
   rtcSetDeviceErrorFunction(device, embreeError, nullptr);
   EmbreeMemory embreeMem;

@@ -86,7 +86,7 @@ struct BuildNode {
   bool leaf() const { return !left; }
 };
 
-constexpr int kMaxDepth = 60;  // binary depth; the 4-wide tree is shallower, stacks hold 3 per level
+constexpr int kMaxDepth = 60;  // binary depth; the 8-wide tree is shallower, stacks hold 7 per level
 constexpr int kMaxBins = 256;
 /// Ranges at least this large are binned in parallel chunks (merged exactly: min, max, counts).
 constexpr uint32_t kParallelBinning = 65536;
@@ -365,9 +365,10 @@ private:
 
 }  // namespace
 
-/// Collapses the binary build tree into 4-wide nodes: each node takes its two children and
-/// repeatedly opens the inner child of largest surface area until it has four (the usual
-/// BVH2 -> BVH4 collapse; Wald et al. 2008, "Getting Rid of Packets"), laid out depth first.
+/// Collapses the binary build tree into 8-wide nodes: each node takes its two children and
+/// repeatedly opens the inner child of largest surface area until it has eight (the usual
+/// BVH2 -> BVHN collapse; Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8), laid out
+/// depth first.
 /// Two passes: `measure` counts every collapsed subtree's nodes, packets and spheres (bottom
 /// up, in parallel), so that `fill` can give each subtree its ranges of the arrays up front and
 /// write subtrees in parallel; the layout is the serial depth-first one, at any thread count.
@@ -379,13 +380,13 @@ struct Hbvh::Flattener {
 
   /// One collapsed node: its children (binary build nodes) and its subtree's sizes.
   struct Collapsed {
-    const BuildNode* kids[4] = {nullptr, nullptr, nullptr, nullptr};
+    const BuildNode* kids[kWidth] = {};
     int k = 0;
-    Sphere sphere[4];               ///< the kids' bounding spheres, where sphereMask has them
+    Sphere sphere[kWidth];          ///< the kids' bounding spheres, where sphereMask has them
     uint32_t sphereMask = 0;
     uint32_t nodes = 0, packets = 0, spheres = 0, leaves = 0;
-    int depth = 0;  ///< levels of Node4s below and including this one
-    std::unique_ptr<Collapsed> sub[4];  ///< for inner kids
+    int depth = 0;  ///< levels of Nodes below and including this one
+    std::unique_ptr<Collapsed> sub[kWidth];  ///< for inner kids
   };
   /// Subtrees of more triangles than the build's parallel threshold are measured and filled
   /// as parallel tasks.
@@ -410,7 +411,7 @@ struct Hbvh::Flattener {
       c->kids[0] = n.left;
       c->kids[1] = n.right;
       c->k = 2;
-      while (c->k < 4) {
+      while (c->k < kWidth) {
         int best = -1;
         float bestArea = -1.0f;
         for (int i = 0; i < c->k; ++i)
@@ -459,15 +460,15 @@ struct Hbvh::Flattener {
   /// `packet`, and its inner kids' subtrees after it, in kid order (the serial depth-first
   /// layout: node, then each kid's subtree; spheres of this node's kids, then the subtrees').
   void fill(const Collapsed& c, uint32_t node, uint32_t sphere, uint32_t packet, uint32_t triangles) {
-    Node4 out;
+    Node out;
     for (int a = 0; a < 3; ++a)
-      for (int i = 0; i < 4; ++i) {
+      for (int i = 0; i < kWidth; ++i) {
         out.lo[a][i] = kInf;
         out.hi[a][i] = -kInf;
       }
     out.sphereBase = sphere;
     out.sphereMask = c.sphereMask;
-    for (int i = 0; i < 4; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
+    for (int i = 0; i < kWidth; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
     for (int i = 0; i < c.k; ++i) {
       const BuildNode& kid = *c.kids[i];
       for (int a = 0; a < 3; ++a) {
@@ -478,7 +479,7 @@ struct Hbvh::Flattener {
     }
     // Where each kid's part starts.
     uint32_t nextNode = node + 1;
-    uint32_t starts[4][3];  // node, sphere, packet
+    uint32_t starts[kWidth][3];  // node, sphere, packet
     for (int i = 0; i < c.k; ++i) {
       starts[i][0] = nextNode;
       starts[i][1] = sphere;
@@ -557,8 +558,8 @@ Hbvh::Hbvh(const Scene& scene, const HbvhBuildSettings& settings, Progress* prog
 Bounds3 Hbvh::bounds() const {
   Bounds3 b;
   if (m_nodes.empty()) return b;
-  const Node4& root = m_nodes[0];
-  for (int i = 0; i < 4; ++i)
+  const Node& root = m_nodes[0];
+  for (int i = 0; i < kWidth; ++i)
     if (root.lo[0][i] <= root.hi[0][i]) {
       b.extend(Vec3(root.lo[0][i], root.lo[1][i], root.lo[2][i]));
       b.extend(Vec3(root.hi[0][i], root.hi[1][i], root.hi[2][i]));
@@ -607,7 +608,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   }
   const BuildNode* root = builder.build(builder.rootRange(), 0);
 
-  // Collapse to 4 children per node and flatten depth first.
+  // Collapse to kWidth children per node and flatten depth first.
   Flattener flat{*this, builder.refs, positions, triangles};
   uint64_t binaryNodes = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f), binaryNodes);
@@ -623,7 +624,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_stats.maxDepth = top->depth;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(Node4) + m_spheres.size() * sizeof(Vec4) + m_tris.size() * sizeof(Triangle4);
+  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_tris.size() * sizeof(Triangle4);
   // Free the build trees before timing stops.
   builder.arena.clear();
   top.reset();
@@ -634,6 +635,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
 nlohmann::json Hbvh::statsJson() const {
   nlohmann::json j = m_stats.toJson();
   j["kind"] = kind();
+  j["simd"] = simdName(m_simd);
   return j;
 }
 

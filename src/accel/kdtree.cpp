@@ -227,6 +227,10 @@ bool KdTree::clipToBounds(const Ray& ray, const float invDir[3], float tMax, flo
 
 namespace {
 
+using sse42::anyHit;  // the kd-tree traverses with the baseline kernels only
+using sse42::closerHits;
+using sse42::RayTri4;
+
 struct KdTodo {
   uint32_t node;
   float t0, t1;
@@ -264,13 +268,10 @@ bool KdTree::traverse(const Ray& ray, float tMax, Hit& hit) const {
       }
     }
     const Node& leaf = m_nodes[cur];
-    for (uint32_t p = leaf.firstPacket; p < leaf.firstPacket + leaf.packetCount(); ++p) {
-      if (kAnyHit) {
-        float t[4], b1[4], b2[4];
-        if (intersectTriangle4(m_tris[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
-      } else {
-        found |= closerHit(m_tris[p], ray, rt, tMax, hit);
-      }
+    if (kAnyHit) {
+      if (anyHit(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rt, tMax)) return true;
+    } else {
+      found |= closerHits(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rt, tMax, hit);
     }
     // The remaining cells lie further along the ray, nearest on top: none holds a closer hit
     // once the nearest starts beyond the closest one.

@@ -1,116 +1,215 @@
 #pragma once
-// The watertight ray-triangle test (triangle.h) on a Triangle4 packet with SSE, shared by the
-// HBVH's and the kd-tree's leaves.
+// The watertight ray-triangle test (triangle.h) on packets of Triangle4s, shared by the HBVH's
+// and the kd-tree's leaves: four triangles at once with SSE (F4), and with AVX2 (F8, where
+// __AVX2__ is defined) two consecutive packets, eight triangles, at once. Both widths run one
+// template, so every lane computes what the scalar-order SSE test computes. Compiled once per
+// instruction set (hbvh_kernels.h), so it lives in a namespace named by VOXCONE_ISA (sse42
+// unless the TU says otherwise) and reaches the scalar test only through an out-of-line call.
 
 #include "voxcone/accel/accel.h"
 #include "voxcone/accel/triangle.h"
 
-#include <smmintrin.h>
+#include <immintrin.h>
+
+#ifndef VOXCONE_ISA
+#define VOXCONE_ISA sse42
+#endif
 
 namespace voxcone {
 
-/// Per-ray constants of the 4-wide watertight test: the scalar shear, broadcast.
+/// intersectTriangleWatertight on lane `lane` of `tri` (hbvh_traverse.cpp, compiled for the
+/// baseline instruction set): the packet test's rare exact-zero edge lanes.
+bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, const WatertightRay& wr, float tMin,
+                           float tMax, float& tOut, float& b1Out, float& b2Out);
+
+namespace VOXCONE_ISA {
+
+/// Four floats (SSE). Comparisons give lane masks of the same type.
+struct F4 {
+  static constexpr int kLanes = 4;
+  __m128 v;
+  static F4 broadcast(float x) { return {_mm_set1_ps(x)}; }
+  static F4 zero() { return {_mm_setzero_ps()}; }
+  /// Coordinate [vtx][axis] of packets[0].
+  static F4 load(const Triangle4* packets, int vtx, int axis) { return {_mm_load_ps(packets[0].v[vtx][axis])}; }
+  void store(float* out) const { _mm_storeu_ps(out, v); }
+  int mask() const { return _mm_movemask_ps(v); }
+};
+inline F4 operator+(F4 a, F4 b) { return {_mm_add_ps(a.v, b.v)}; }
+inline F4 operator-(F4 a, F4 b) { return {_mm_sub_ps(a.v, b.v)}; }
+inline F4 operator*(F4 a, F4 b) { return {_mm_mul_ps(a.v, b.v)}; }
+inline F4 operator/(F4 a, F4 b) { return {_mm_div_ps(a.v, b.v)}; }
+inline F4 operator&(F4 a, F4 b) { return {_mm_and_ps(a.v, b.v)}; }
+inline F4 operator|(F4 a, F4 b) { return {_mm_or_ps(a.v, b.v)}; }
+inline F4 operator^(F4 a, F4 b) { return {_mm_xor_ps(a.v, b.v)}; }
+inline F4 andNot(F4 a, F4 b) { return {_mm_andnot_ps(a.v, b.v)}; }  ///< ~a & b
+inline F4 max(F4 a, F4 b) { return {_mm_max_ps(a.v, b.v)}; }
+inline F4 operator==(F4 a, F4 b) { return {_mm_cmpeq_ps(a.v, b.v)}; }
+inline F4 operator!=(F4 a, F4 b) { return {_mm_cmpneq_ps(a.v, b.v)}; }
+inline F4 operator<(F4 a, F4 b) { return {_mm_cmplt_ps(a.v, b.v)}; }
+inline F4 operator<=(F4 a, F4 b) { return {_mm_cmple_ps(a.v, b.v)}; }
+inline F4 operator>(F4 a, F4 b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
+inline F4 operator>=(F4 a, F4 b) { return {_mm_cmpge_ps(a.v, b.v)}; }
+
+#ifdef __AVX2__
+/// Eight floats (AVX): lanes 0-3 from one packet, 4-7 from the next.
+struct F8 {
+  static constexpr int kLanes = 8;
+  __m256 v;
+  static F8 broadcast(float x) { return {_mm256_set1_ps(x)}; }
+  static F8 zero() { return {_mm256_setzero_ps()}; }
+  static F8 load(const Triangle4* packets, int vtx, int axis) {
+    return {_mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(packets[0].v[vtx][axis])),
+                                 _mm_load_ps(packets[1].v[vtx][axis]), 1)};
+  }
+  void store(float* out) const { _mm256_storeu_ps(out, v); }
+  int mask() const { return _mm256_movemask_ps(v); }
+};
+inline F8 operator+(F8 a, F8 b) { return {_mm256_add_ps(a.v, b.v)}; }
+inline F8 operator-(F8 a, F8 b) { return {_mm256_sub_ps(a.v, b.v)}; }
+inline F8 operator*(F8 a, F8 b) { return {_mm256_mul_ps(a.v, b.v)}; }
+inline F8 operator/(F8 a, F8 b) { return {_mm256_div_ps(a.v, b.v)}; }
+inline F8 operator&(F8 a, F8 b) { return {_mm256_and_ps(a.v, b.v)}; }
+inline F8 operator|(F8 a, F8 b) { return {_mm256_or_ps(a.v, b.v)}; }
+inline F8 operator^(F8 a, F8 b) { return {_mm256_xor_ps(a.v, b.v)}; }
+inline F8 andNot(F8 a, F8 b) { return {_mm256_andnot_ps(a.v, b.v)}; }
+inline F8 max(F8 a, F8 b) { return {_mm256_max_ps(a.v, b.v)}; }
+inline F8 operator==(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_EQ_OQ)}; }
+inline F8 operator!=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_NEQ_UQ)}; }
+inline F8 operator<(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LT_OQ)}; }
+inline F8 operator<=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
+inline F8 operator>(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
+inline F8 operator>=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
+#endif
+
+/// Per-ray constants of the packet test: the scalar shear.
 struct RayTri4 {
   WatertightRay wr;
-  __m128 org[3];
-  __m128 sx, sy, sz;
-  explicit RayTri4(const Ray& r) : wr(r.dir) {
-    for (int a = 0; a < 3; ++a) org[a] = _mm_set1_ps(r.origin[a]);
-    sx = _mm_set1_ps(wr.sx);
-    sy = _mm_set1_ps(wr.sy);
-    sz = _mm_set1_ps(wr.sz);
-  }
+  float org[3];
+  explicit RayTri4(const Ray& r) : wr(r.dir), org{r.origin.x, r.origin.y, r.origin.z} {}
 };
 
-/// The watertight test (triangle.h) on four triangles at once, with the same operations in the
-/// same order as the scalar test, so both give the same t. Lanes where an edge function is
-/// exactly zero are redone by the scalar test, which resolves them in double precision.
-/// Returns the mask of lanes hit in (tMin, tMax) and their t and barycentrics.
-inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
-                              float tOut[4], float b1Out[4], float b2Out[4]) {
+/// The watertight test (triangle.h) on F::kLanes triangles at once (lane i: packets[i / 4],
+/// its lane i % 4), with the same operations in the same order as the scalar test, so both give
+/// the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
+/// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
+/// and barycentrics.
+template <class F>
+inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
+                            float* tOut, float* b1Out, float* b2Out) {
   const int kx = rt.wr.kx, ky = rt.wr.ky, kz = rt.wr.kz;
-  __m128 px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
+  const F sx = F::broadcast(rt.wr.sx), sy = F::broadcast(rt.wr.sy), sz = F::broadcast(rt.wr.sz);
+  F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
   for (int vtx = 0; vtx < 3; ++vtx) {
-    const __m128 x = _mm_sub_ps(_mm_load_ps(tri.v[vtx][kx]), rt.org[kx]);
-    const __m128 y = _mm_sub_ps(_mm_load_ps(tri.v[vtx][ky]), rt.org[ky]);
-    pz[vtx] = _mm_sub_ps(_mm_load_ps(tri.v[vtx][kz]), rt.org[kz]);
-    px[vtx] = _mm_sub_ps(x, _mm_mul_ps(rt.sx, pz[vtx]));
-    py[vtx] = _mm_sub_ps(y, _mm_mul_ps(rt.sy, pz[vtx]));
+    const F x = F::load(packets, vtx, kx) - F::broadcast(rt.org[kx]);
+    const F y = F::load(packets, vtx, ky) - F::broadcast(rt.org[ky]);
+    pz[vtx] = F::load(packets, vtx, kz) - F::broadcast(rt.org[kz]);
+    px[vtx] = x - sx * pz[vtx];
+    py[vtx] = y - sy * pz[vtx];
   }
   // Scaled barycentrics: 2D edge functions (A = vertex 0, B = 1, C = 2).
-  const __m128 u = _mm_sub_ps(_mm_mul_ps(px[2], py[1]), _mm_mul_ps(py[2], px[1]));
-  const __m128 v = _mm_sub_ps(_mm_mul_ps(px[0], py[2]), _mm_mul_ps(py[0], px[2]));
-  const __m128 w = _mm_sub_ps(_mm_mul_ps(px[1], py[0]), _mm_mul_ps(py[1], px[0]));
-  const __m128 zero = _mm_setzero_ps();
-  const int zeroLanes = _mm_movemask_ps(
-      _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)), _mm_cmpeq_ps(w, zero)));
+  const F u = px[2] * py[1] - py[2] * px[1];
+  const F v = px[0] * py[2] - py[0] * px[2];
+  const F w = px[1] * py[0] - py[1] * px[0];
+  const F zero = F::zero();
+  const int zeroLanes = ((u == zero) | (v == zero) | (w == zero)).mask();
   // Inside when all three share a sign; NaN lanes (padding) compare false everywhere.
-  const __m128 allPos = _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(u, zero), _mm_cmpge_ps(v, zero)), _mm_cmpge_ps(w, zero));
-  const __m128 allNeg = _mm_and_ps(_mm_and_ps(_mm_cmple_ps(u, zero), _mm_cmple_ps(v, zero)), _mm_cmple_ps(w, zero));
-  const __m128 det = _mm_add_ps(_mm_add_ps(u, v), w);
-  __m128 valid = _mm_and_ps(_mm_or_ps(allPos, allNeg), _mm_cmpneq_ps(det, zero));
+  const F allPos = (u >= zero) & (v >= zero) & (w >= zero);
+  const F allNeg = (u <= zero) & (v <= zero) & (w <= zero);
+  const F det = u + v + w;
+  F valid = (allPos | allNeg) & (det != zero);
   // Scaled distance compared against the range before dividing; |det| and the sign-flipped
   // distance replace the scalar test's two branches.
-  const __m128 tScaled = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, _mm_mul_ps(rt.sz, pz[0])), _mm_mul_ps(v, _mm_mul_ps(rt.sz, pz[1]))),
-                                    _mm_mul_ps(w, _mm_mul_ps(rt.sz, pz[2])));
-  const __m128 signMask = _mm_set1_ps(-0.0f);
-  const __m128 detSign = _mm_and_ps(det, signMask);
-  const __m128 detAbs = _mm_xor_ps(det, detSign);
-  const __m128 tAbs = _mm_xor_ps(tScaled, detSign);
-  valid = _mm_and_ps(valid, _mm_cmpgt_ps(tAbs, _mm_mul_ps(_mm_set1_ps(tMin), detAbs)));
-  valid = _mm_and_ps(valid, _mm_cmplt_ps(tAbs, _mm_mul_ps(_mm_set1_ps(tMax), detAbs)));
-  int mask = _mm_movemask_ps(valid) & ~zeroLanes;
+  const F tScaled = u * (sz * pz[0]) + v * (sz * pz[1]) + w * (sz * pz[2]);
+  const F signMask = F::broadcast(-0.0f);
+  const F detSign = det & signMask;
+  const F detAbs = det ^ detSign;
+  const F tAbs = tScaled ^ detSign;
+  valid = valid & (tAbs > F::broadcast(tMin) * detAbs) & (tAbs < F::broadcast(tMax) * detAbs);
+  int mask = valid.mask() & ~zeroLanes;
   if (mask) {
-    const __m128 invDet = _mm_div_ps(_mm_set1_ps(1.0f), det);
-    const __m128 t = _mm_mul_ps(tScaled, invDet);
+    const F invDet = F::broadcast(1.0f) / det;
+    const F t = tScaled * invDet;
     // Only distances above their own rounding error (watertightDistanceError, lane by lane).
-    const auto abs4 = [&](__m128 a) { return _mm_andnot_ps(signMask, a); };
-    const auto max3 = [&](__m128 a, __m128 b, __m128 c) { return _mm_max_ps(abs4(a), _mm_max_ps(abs4(b), abs4(c))); };
-    const __m128 maxZ = _mm_mul_ps(max3(pz[0], pz[1], pz[2]), abs4(rt.sz));
-    const __m128 maxX = max3(px[0], px[1], px[2]);
-    const __m128 maxY = max3(py[0], py[1], py[2]);
-    const __m128 maxE = max3(u, v, w);
-    const __m128 g2 = _mm_set1_ps(errorGamma(2)), g3 = _mm_set1_ps(errorGamma(3)), g5 = _mm_set1_ps(errorGamma(5));
-    const __m128 deltaZ = _mm_mul_ps(g3, maxZ);
-    const __m128 deltaX = _mm_mul_ps(g5, _mm_add_ps(maxX, maxZ));
-    const __m128 deltaY = _mm_mul_ps(g5, _mm_add_ps(maxY, maxZ));
-    const __m128 deltaE = _mm_mul_ps(
-        _mm_set1_ps(2.0f), _mm_add_ps(_mm_add_ps(_mm_mul_ps(g2, _mm_mul_ps(maxX, maxY)), _mm_mul_ps(deltaY, maxX)),
-                                      _mm_mul_ps(deltaX, maxY)));
-    const __m128 deltaT = _mm_mul_ps(
-        _mm_mul_ps(_mm_set1_ps(3.0f), _mm_add_ps(_mm_add_ps(_mm_mul_ps(g3, _mm_mul_ps(maxE, maxZ)), _mm_mul_ps(deltaE, maxZ)),
-                                                 _mm_mul_ps(deltaZ, maxE))),
-        abs4(invDet));
-    mask &= _mm_movemask_ps(_mm_cmpgt_ps(t, deltaT));
-    _mm_storeu_ps(tOut, t);
-    _mm_storeu_ps(b1Out, _mm_mul_ps(v, invDet));
-    _mm_storeu_ps(b2Out, _mm_mul_ps(w, invDet));
+    const auto abs = [&](F a) { return andNot(signMask, a); };
+    const auto max3 = [&](F a, F b, F c) { return max(abs(a), max(abs(b), abs(c))); };
+    const F maxZ = max3(pz[0], pz[1], pz[2]) * abs(sz);
+    const F maxX = max3(px[0], px[1], px[2]);
+    const F maxY = max3(py[0], py[1], py[2]);
+    const F maxE = max3(u, v, w);
+    const F g2 = F::broadcast(errorGamma(2)), g3 = F::broadcast(errorGamma(3)), g5 = F::broadcast(errorGamma(5));
+    const F deltaZ = g3 * maxZ;
+    const F deltaX = g5 * (maxX + maxZ);
+    const F deltaY = g5 * (maxY + maxZ);
+    const F deltaE = F::broadcast(2.0f) * (g2 * (maxX * maxY) + deltaY * maxX + deltaX * maxY);
+    const F deltaT = F::broadcast(3.0f) * (g3 * (maxE * maxZ) + deltaE * maxZ + deltaZ * maxE) * abs(invDet);
+    mask &= (t > deltaT).mask();
+    t.store(tOut);
+    (v * invDet).store(b1Out);
+    (w * invDet).store(b2Out);
   }
   for (int lanes = zeroLanes; lanes; lanes &= lanes - 1) {
     const int i = __builtin_ctz(static_cast<unsigned>(lanes));
-    const Vec3 p0(tri.v[0][0][i], tri.v[0][1][i], tri.v[0][2][i]);
-    const Vec3 p1(tri.v[1][0][i], tri.v[1][1][i], tri.v[1][2][i]);
-    const Vec3 p2(tri.v[2][0][i], tri.v[2][1][i], tri.v[2][2][i]);
-    if (intersectTriangleWatertight(ray.origin, rt.wr, p0, p1, p2, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
+    if (intersectTriangleLane(packets[i / 4], i % 4, ray, rt.wr, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
       mask |= 1 << i;
   }
   return mask;
 }
 
-/// Packet `tri` tested against the closest-hit query so far (tMax, hit): the nearest lane hit
-/// in (tMin, tMax) becomes the closest. True when one did.
-inline bool closerHit(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float& tMax, Hit& hit) {
-  float t[4], b1[4], b2[4];
+/// One packet, four lanes (the kd-tree's and the SSE kernels' test).
+inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
+                              float tOut[4], float b1Out[4], float b2Out[4]) {
+  return intersectPackets<F4>(&tri, ray, rt, tMin, tMax, tOut, b1Out, b2Out);
+}
+
+/// Packets [first, first + count) tested against the closest-hit query so far (tMax, hit), two
+/// at a time: both packets of a pair against the same tMax, their eight lanes then taken in
+/// order (the nearest, the first of equals, becomes the closest). With AVX2 a pair is one
+/// 8-wide test; without, two 4-wide ones with the same result. True when one was closer.
+inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float& tMax,
+                       Hit& hit) {
   bool found = false;
-  for (int mask = intersectTriangle4(tri, ray, rt, ray.tMin, tMax, t, b1, b2); mask; mask &= mask - 1) {
-    const int i = __builtin_ctz(static_cast<unsigned>(mask));
-    if (t[i] < tMax) {
-      tMax = t[i];
-      hit = {t[i], tri.id[i], b1[i], b2[i]};
-      found = true;
+  for (uint32_t p = 0; p < count; p += 2) {
+    const Triangle4* packets = first + p;
+    alignas(32) float t[8], b1[8], b2[8];
+    int mask;
+    if (p + 1 == count) {
+      mask = intersectPackets<F4>(packets, ray, rt, ray.tMin, tMax, t, b1, b2);
+    } else {
+#ifdef __AVX2__
+      mask = intersectPackets<F8>(packets, ray, rt, ray.tMin, tMax, t, b1, b2);
+#else
+      mask = intersectPackets<F4>(packets, ray, rt, ray.tMin, tMax, t, b1, b2) |
+             intersectPackets<F4>(packets + 1, ray, rt, ray.tMin, tMax, t + 4, b1 + 4, b2 + 4) << 4;
+#endif
+    }
+    for (; mask; mask &= mask - 1) {
+      const int i = __builtin_ctz(static_cast<unsigned>(mask));
+      if (t[i] < tMax) {
+        tMax = t[i];
+        hit = {t[i], packets[i / 4].id[i % 4], b1[i], b2[i]};
+        found = true;
+      }
     }
   }
   return found;
 }
 
+/// Any hit among packets [first, first + count) in (tMin, tMax), two packets at a time.
+inline bool anyHit(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float tMax) {
+  for (uint32_t p = 0; p < count; p += 2) {
+    alignas(32) float t[8], b1[8], b2[8];
+#ifdef __AVX2__
+    if (p + 1 < count) {
+      if (intersectPackets<F8>(first + p, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
+      continue;
+    }
+#endif
+    if (intersectPackets<F4>(first + p, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
+    if (p + 1 < count && intersectPackets<F4>(first + p + 1, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
+  }
+  return false;
+}
+
+}  // namespace VOXCONE_ISA
 }  // namespace voxcone

@@ -19,7 +19,9 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <cstdio>
 #include <functional>
+#include <sstream>
 
 namespace voxcone {
 namespace {
@@ -124,12 +126,14 @@ struct Variant {
 };
 
 std::vector<Variant> variants() {
-  auto hbvh = [](float ratio, int leaf) {
+  auto hbvh = [](float ratio, int leaf, Hbvh::Simd simd = Hbvh::hostSimd()) {
     return [=](const Soup& s) {
       HbvhBuildSettings settings;
       settings.sphereAreaRatio = ratio;
       settings.maxLeafSize = leaf;
-      return std::unique_ptr<Accel>(std::make_unique<Hbvh>(s.pos, s.tris, settings));
+      auto bvh = std::make_unique<Hbvh>(s.pos, s.tris, settings);
+      bvh->setSimd(simd);
+      return std::unique_ptr<Accel>(std::move(bvh));
     };
   };
   auto kd = [](int bins, int leaf, float isect) {
@@ -143,8 +147,16 @@ std::vector<Variant> variants() {
   };
   // A plain AABB BVH, the hybrid, spheres on every node with small leaves; the kd-tree as
   // built by default and pushed to deep trees of many straddling references.
-  return {{"bvh", hbvh(0.0f, 8)},         {"hbvh", hbvh(1.0f, 8)},        {"hbvh-all-spheres", hbvh(100.0f, 2)},
-          {"kdtree", kd(32, 8, 1.0f)},    {"kdtree-deep", kd(7, 1, 20.0f)}};
+  // The HBVH with the host's kernels (AVX2 where the CPU has it) and, where those are not SSE,
+  // once more with the SSE kernels forced.
+  std::vector<Variant> v = {{"bvh", hbvh(0.0f, 8)},      {"hbvh", hbvh(1.0f, 8)},
+                            {"hbvh-all-spheres", hbvh(100.0f, 2)}, {"kdtree", kd(32, 8, 1.0f)},
+                            {"kdtree-deep", kd(7, 1, 20.0f)}};
+  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) {
+    v.push_back({"hbvh-sse4.2", hbvh(1.0f, 8, Hbvh::Simd::Sse42)});
+    v.push_back({"hbvh-all-spheres-sse4.2", hbvh(100.0f, 2, Hbvh::Simd::Sse42)});
+  }
+  return v;
 }
 
 TEST(Accel, EveryStructureMatchesBruteForceOnOverAMillionRays) {
@@ -222,8 +234,8 @@ TEST(Hbvh, StatsAreConsistent) {
   const HbvhStats& st = bvh.stats();
   EXPECT_EQ(st.triangles, 5000u);
   EXPECT_EQ(st.binaryNodes, 2 * st.leaves - 1);  // the binary tree is full; collapsing keeps its leaves
-  // Each 4-wide node replaces 1-3 binary inner nodes: leaves - 1 = sum over nodes of (children - 1).
-  EXPECT_GE(st.nodes, (st.leaves - 1 + 2) / 3);
+  // Each 8-wide node replaces 1-7 binary inner nodes: leaves - 1 = sum over nodes of (children - 1).
+  EXPECT_GE(st.nodes, (st.leaves - 1 + Hbvh::kWidth - 2) / (Hbvh::kWidth - 1));
   EXPECT_LE(st.nodes, st.leaves - 1);
   EXPECT_GT(st.maxDepth, 3);
   EXPECT_LE(st.maxDepth, 40);
@@ -277,6 +289,63 @@ TEST(Accel, EmptyAndDegenerateInput) {
     EXPECT_FLOAT_EQ(h->t, 2.0f);
   }
   EXPECT_THROW(buildAccel("octree", std::vector<Vec3>{}, std::vector<UVec3>{}), SettingsError);
+}
+
+TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
+  // The AVX2 and SSE kernels run the same operations in the same order, so renders do not
+  // depend on the machine's instruction set: every hit, distance and barycentric equal.
+  if (Hbvh::hostSimd() != Hbvh::Simd::Avx2) GTEST_SKIP() << "this CPU runs no AVX2 kernels";
+  for (const Soup& s : {sphereSoup(3), randomSoup(3000, 13), cornellSoup()}) {
+    Bounds3 b;
+    for (const Vec3& p : s.pos) b.extend(p);
+    for (float ratio : {1.0f, 100.0f}) {
+      HbvhBuildSettings settings;
+      settings.sphereAreaRatio = ratio;
+      Hbvh avx(s.pos, s.tris, settings), sse(s.pos, s.tris, settings);
+      avx.setSimd(Hbvh::Simd::Avx2);
+      sse.setSimd(Hbvh::Simd::Sse42);
+      Rng rng(17, 0);
+      int hits = 0, differ = 0;
+      for (int i = 0; i < 50000; ++i) {
+        const Ray r = makeRay(s, b, rng);
+        const auto a = avx.intersect(r), c = sse.intersect(r);
+        hits += a.has_value();
+        if (a.has_value() != c.has_value() ||
+            (a && (a->t != c->t || a->triangle != c->triangle || a->b1 != c->b1 || a->b2 != c->b2)))
+          ++differ;
+        const float tOcc = a ? a->t : r.tMax;
+        if (avx.occluded(r, tOcc) != sse.occluded(r, tOcc)) ++differ;
+      }
+      EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio;
+      EXPECT_GT(hits, 5000) << s.name;
+    }
+  }
+}
+
+TEST(Hbvh, AvxKernelsShareNoInlineCodeWithTheBaseline) {
+  // The AVX2 kernels' object file may define only functions of namespace voxcone::avx2: an
+  // inline function of another namespace compiled there with AVX2 could be the copy the linker
+  // keeps for every caller, and crash the binary on a CPU without AVX2.
+#ifndef VOXCONE_AVX2_OBJECT
+  GTEST_SKIP() << "built without AVX2 kernels";
+#else
+  const std::string cmd = std::string("nm -C --defined-only -g '") + VOXCONE_AVX2_OBJECT + "' 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  char buf[4096];
+  while (fgets(buf, sizeof(buf), p)) out += buf;
+  const int rc = pclose(p);
+  if (rc != 0) GTEST_SKIP() << "nm failed: " << out;
+  int defined = 0;
+  std::istringstream lines(out);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty()) continue;
+    ++defined;
+    EXPECT_NE(line.find(" voxcone::avx2::"), std::string::npos) << line;
+  }
+  EXPECT_GE(defined, 2);  // hbvhIntersect and hbvhOccluded
+#endif
 }
 
 TEST(KdTree, StatsAreConsistent) {

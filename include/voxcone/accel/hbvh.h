@@ -2,14 +2,16 @@
 /// \file hbvh.h
 /// The hybrid bounding volume hierarchy (HBVH): a binned-SAH BVH over triangles whose nodes keep
 /// an AABB and, where it fits tighter, a bounding sphere; a ray must pass both to enter a node.
-/// Built binary, then collapsed to four children per node whose boxes are tested together with
-/// SSE (the layout of Embree's BVH4).
+/// Built binary, then collapsed to eight children per node whose boxes are tested together: with
+/// one AVX2 register per plane where the CPU has it, as two SSE halves where not (the layout of
+/// Embree's BVH8; the kernel is chosen at run time, so one binary runs on any x86-64).
 /// Layout as in Embree's kernels/bvh: build settings and statistics are structs of their own,
 /// the split heuristic (hbvh_build.cpp), traversal (hbvh_traverse.cpp) and the primitive test
 /// (triangle.h) live apart.
 
 #include "voxcone/accel/accel.h"
 #include "voxcone/accel/triangle.h"
+#include "voxcone/core/huge_pages.h"
 
 namespace voxcone {
 
@@ -32,11 +34,11 @@ struct HbvhBuildSettings {
 /// Statistics of a built HBVH (cf. Embree's BVHNStatistics).
 struct HbvhStats {
   uint64_t triangles = 0;
-  uint64_t nodes = 0;         ///< 4-wide nodes
+  uint64_t nodes = 0;         ///< 8-wide nodes
   uint64_t leaves = 0;
   uint64_t binaryNodes = 0;   ///< nodes of the binary tree before the collapse
   uint64_t sphereNodes = 0;   ///< children (inner or leaf) that keep a bounding sphere
-  int maxDepth = 0;           ///< of the 4-wide tree, the root at depth 1
+  int maxDepth = 0;           ///< of the 8-wide tree, the root at depth 1
   double sahCost = 0.0;       ///< SAH cost of the binary tree, relative to the root's area
   double avgLeafSize = 0.0;
   uint64_t bytes = 0;         ///< memory of nodes, spheres and triangle data
@@ -48,12 +50,14 @@ struct HbvhStats {
 /// "bvh"): the same SAH build, layout and traversal, no spheres.
 class Hbvh final : public Accel {
 public:
+  static constexpr int kWidth = 8;  ///< children per node
 
-  /// 4-wide node, 128 bytes: the children's boxes side by side (one SSE register per plane).
-  struct alignas(64) Node4 {
-    float lo[3][4];          ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
-    float hi[3][4];
-    uint32_t child[4];       ///< node index, or kLeafBit | (packets - 1) << kCountShift | first packet
+  /// 8-wide node, 256 bytes: the children's boxes side by side (one AVX register, or two SSE
+  /// registers, per plane).
+  struct alignas(64) Node {
+    float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
+    float hi[3][kWidth];
+    uint32_t child[kWidth];  ///< node index, or kLeafBit | (packets - 1) << kCountShift | first packet
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
@@ -82,15 +86,27 @@ public:
   const HbvhStats& stats() const { return m_stats; }
   const HbvhBuildSettings& settings() const { return m_settings; }
 
+  /// The traversal kernels: SSE 4.2 (any x86-64 this project targets) or AVX2 (8 boxes in one
+  /// register). Both run the same operations in the same order, so they find the same hits, bit
+  /// for bit; AVX2 is only faster.
+  enum class Simd { Sse42, Avx2 };
+  /// The best kernel this CPU runs; VOXCONE_SIMD=sse4.2 in the environment forces SSE.
+  static Simd hostSimd();
+  static const char* simdName(Simd simd);
+  /// Choose the kernel (tests run both); SettingsError when the CPU lacks it.
+  void setSimd(Simd simd);
+  Simd simd() const { return m_simd; }
+
 private:
   void build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress);
-  struct Flattener;  ///< collapses the binary build tree into Node4s (hbvh_build.cpp)
+  struct Flattener;  ///< collapses the binary build tree into Nodes (hbvh_build.cpp)
 
   HbvhBuildSettings m_settings;
   HbvhStats m_stats;
-  std::vector<Node4> m_nodes;
+  Simd m_simd = hostSimd();
+  std::vector<Node, HugePageAllocator<Node>> m_nodes;
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
-  std::vector<Triangle4> m_tris;    ///< leaf triangles, four to a packet, in leaf order
+  std::vector<Triangle4, HugePageAllocator<Triangle4>> m_tris;  ///< leaf triangles, four to a packet, in leaf order
 };
 
 }  // namespace voxcone

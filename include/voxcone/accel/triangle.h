@@ -70,9 +70,11 @@ struct WatertightRay {
     kx = kz == 2 ? 0 : kz + 1;
     ky = kx == 2 ? 0 : kx + 1;
     if (dir[kz] < 0.0f) std::swap(kx, ky);
-    sx = dir[kx] / dir[kz];
-    sy = dir[ky] / dir[kz];
+    // One division: the shear by the reciprocal (consistent for every triangle, which is all
+    // watertightness needs).
     sz = 1.0f / dir[kz];
+    sx = dir[kx] * sz;
+    sy = dir[ky] * sz;
   }
 };
 

@@ -1,0 +1,31 @@
+#pragma once
+// The HBVH's traversal kernels, one set per instruction set (as Embree's isa namespaces): the
+// same source (hbvh_traverse_kernel.h) compiled for SSE 4.2 in hbvh_traverse.cpp and for AVX2
+// in hbvh_traverse_avx2.cpp; Hbvh::intersect / occluded call the one Hbvh::simd() names.
+
+#include "voxcone/accel/hbvh.h"
+
+#include <optional>
+
+namespace voxcone {
+
+/// The arrays a traversal reads; nodes[0] is the root (the tree is not empty).
+struct HbvhArrays {
+  const Hbvh::Node* nodes;
+  const Vec4* spheres;
+  const Triangle4* tris;
+};
+
+namespace sse42 {
+std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+}  // namespace sse42
+
+#ifdef VOXCONE_AVX2_KERNELS
+namespace avx2 {
+std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+}  // namespace avx2
+#endif
+
+}  // namespace voxcone
