@@ -192,6 +192,9 @@ public:
     if (bestAxis < 0 || left.end == begin || left.end == end) medianSplit(range, left, right);
 
     if (count >= static_cast<uint32_t>(m_s.parallelThreshold)) {
+      // A 10M-triangle build takes seconds: stop it when asked (every subtree of this size is
+      // milliseconds).
+      if (m_progress && m_progress->cancelled()) throw CancelledError();
       tbb::parallel_invoke([&] { node->left = build(left, depth + 1); },
                            [&] { node->right = build(right, depth + 1); });
     } else {

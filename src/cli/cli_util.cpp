@@ -22,6 +22,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <set>
 
 namespace voxcone {
 
@@ -58,6 +60,16 @@ std::string shellQuote(const std::string& s) {
   return r + "'";
 }
 
+namespace {
+std::mutex g_childrenMutex;
+std::set<pid_t> g_children;  ///< runCapture's children still running
+}  // namespace
+
+void signalChildren(int sig) {
+  std::lock_guard<std::mutex> lock(g_childrenMutex);
+  for (pid_t pid : g_children) ::kill(pid, sig);
+}
+
 int runCapture(const std::string& cmd, std::string& out) {
   // fork + exec instead of popen, so that the child gets SIGTERM when the thread waiting for it
   // dies (PR_SET_PDEATHSIG; kept across exec): a batch killed with SIGKILL used to leave its
@@ -80,6 +92,10 @@ int runCapture(const std::string& cmd, std::string& out) {
     ::execl("/bin/sh", "sh", "-c", command, static_cast<char*>(nullptr));
     ::_exit(127);
   }
+  {
+    std::lock_guard<std::mutex> lock(g_childrenMutex);
+    g_children.insert(pid);
+  }
   ::close(fds[1]);
   std::array<char, 4096> buf;
   for (;;) {
@@ -91,6 +107,11 @@ int runCapture(const std::string& cmd, std::string& out) {
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
+  {
+    std::lock_guard<std::mutex> lock(g_childrenMutex);
+    g_children.erase(pid);
+  }
+  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);  // as a shell reports it
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
@@ -107,11 +128,14 @@ nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& 
   const std::string manifestPath = outDir + "/manifest.json";
   writeJsonAtomic(manifestPath, manifest);
   std::string out;
-  const std::string cmd = "exec " + shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -q -o " +
+  // The batch's stderr is the study's: its "[i/N] job elapsed eta: status" lines are the
+  // study's progress.
+  const std::string cmd = "exec " + shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " --skip-existing -o " +
                           shellQuote(outDir + "/runs") + " -j " + std::to_string(jobsInFlight) + " -t " +
-                          std::to_string(threadsPerJob) + " 2>&1";
+                          std::to_string(threadsPerJob);
   const int code = runCapture(cmd, out);
-  if (code != 0 && code != 1) throw Error("batch failed: " + out.substr(0, out.find('\n')));
+  if (code == 128 + SIGINT || code == 128 + SIGTERM) throw CancelledError("the study's batch was interrupted; run it again to resume");
+  if (code != 0 && code != 1) throw Error("batch failed (exit status " + std::to_string(code) + "; its message is above)");
   std::ifstream f(outDir + "/runs/results.json");
   if (!f) throw Error("batch wrote no " + outDir + "/runs/results.json");
   return nlohmann::json::parse(f);

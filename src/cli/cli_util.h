@@ -24,10 +24,14 @@ const CLI::Validator& positiveNumber();
 /// bits) is a SettingsError naming `option`, never clamped.
 uint64_t parseSeed(const std::string& option, const std::string& text);
 
-/// Run `cmd` through /bin/sh and capture its stdout; returns the exit status (-1 when it did
-/// not exit normally). The child gets SIGTERM if the calling thread dies first (a command
-/// starting with "exec" passes that on to its program). Throws Error when it cannot be started.
+/// Run `cmd` through /bin/sh and capture its stdout; returns the exit status (128 + the signal
+/// when a signal ended it, as a shell says). The child gets SIGTERM if the calling thread dies
+/// first (a command starting with "exec" passes that on to its program). Throws Error when it
+/// cannot be started.
 int runCapture(const std::string& cmd, std::string& out);
+
+/// Send `sig` to every child runCapture is waiting for (a batch passing on SIGTERM).
+void signalChildren(int sig);
 
 /// Path of the running voxcone executable.
 std::string selfExe();

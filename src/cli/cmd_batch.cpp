@@ -7,6 +7,7 @@
 #include "commands.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/progress.h"
+#include "voxcone/core/timer.h"
 #include "voxcone/image/image_io.h"
 #include "voxcone/image/metrics.h"
 
@@ -16,6 +17,8 @@
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
+#include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -24,6 +27,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <thread>
 
 namespace voxcone {
 
@@ -279,6 +283,13 @@ JobResult runJob(const Job& job, const fs::path& outDir, const BatchOptions& o) 
   std::string out;
   const int code = runCapture(cmd, out);
   JobResult r;
+  if (code == 128 + SIGINT || code == 128 + SIGTERM || code == 128 + SIGKILL) {
+    // Stopped by a signal (the batch passing on its own, a scheduler, a user): no outputs;
+    // --skip-existing runs it again.
+    r.status = "interrupted";
+    r.error = std::string("stopped by ") + (code == 128 + SIGINT ? "SIGINT" : code == 128 + SIGTERM ? "SIGTERM" : "SIGKILL");
+    return r;
+  }
   if (code != 0) {
     r.status = "failed";
     r.error = lastLine(out);
@@ -421,6 +432,20 @@ void runBatch(const BatchOptions& o) {
   // Jobs in flight (-j) are TBB tasks, each waiting on its child process; each child renders
   // with -t threads. A job's outputs are its render's own atomic writes: a job interrupted or
   // failed leaves none, and --skip-existing takes a job whose sidecar (written last) is there.
+  // SIGINT / SIGTERM: no job starts any more, and the renders running get SIGTERM at once
+  // (kill -TERM of the batch alone reaches only the batch; a scheduler's signal to the whole
+  // job reaches them too).
+  std::atomic<bool> batchDone{false};
+  std::thread watcher([&] {
+    while (!batchDone.load()) {
+      if (interruptRequested()) {
+        signalChildren(SIGTERM);
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+  });
+  Timer elapsed;
   tbb::task_arena arena(std::max(1, o.jobsInFlight));
   arena.execute([&] {
     tbb::parallel_for(
@@ -437,7 +462,7 @@ void runBatch(const BatchOptions& o) {
             }
             if (o.skipExisting && completeOutputs(outDir, job.name)) r.status = "existing";
             else r = runJob(job, outDir, o);
-            if (r.status != "failed") {
+            if (r.status == "ok" || r.status == "existing") {
               try {
                 std::ifstream f(sidecar);
                 r.sidecar = nlohmann::json::parse(f);
@@ -455,13 +480,20 @@ void runBatch(const BatchOptions& o) {
             }
             std::lock_guard<std::mutex> lock(printMutex);
             ++finished;
-            if (!o.quiet)
-              std::fprintf(stderr, "[%zu/%zu] %s: %s%s%s\n", finished, jobs.size(), job.name.c_str(), r.status.c_str(),
+            if (!o.quiet) {
+              // Elapsed and, from the jobs finished so far, the time the rest will take.
+              const double sec = elapsed.seconds();
+              const double eta = sec / double(finished) * double(jobs.size() - finished);
+              std::fprintf(stderr, "[%zu/%zu] %s elapsed %s eta %s: %s%s%s\n", finished, jobs.size(), job.name.c_str(),
+                           formatDuration(sec).c_str(), formatDuration(eta).c_str(), r.status.c_str(),
                            r.error.empty() ? "" : ": ", r.error.c_str());
+            }
           }
         },
         tbb::simple_partitioner());
   });
+  batchDone = true;
+  watcher.join();
 
   std::vector<nlohmann::json> rows;
   std::map<std::string, size_t> counts;
@@ -472,10 +504,12 @@ void runBatch(const BatchOptions& o) {
   writeTables(rows, stem,
               {{"manifest", fs::absolute(o.manifestPath).string()}, {"shard", o.shard.empty() ? "0/1" : o.shard},
                {"jobs_in_flight", o.jobsInFlight}, {"threads_per_job", o.threadsPerJob}});
-  std::printf("batch: %zu jobs: %zu ok, %zu existing, %zu failed, %zu not run; wrote %s.csv, %s.json\n", jobs.size(),
-              counts["ok"], counts["existing"], counts["failed"], counts["not run"], stem.c_str(), stem.c_str());
-  if (interruptRequested()) throw CancelledError();
-  if (counts["failed"] > 0) throw CLI::RuntimeError(1);
+  std::printf("batch: %zu jobs: %zu ok, %zu existing, %zu failed, %zu interrupted, %zu not run; wrote %s.csv, %s.json\n",
+              jobs.size(), counts["ok"], counts["existing"], counts["failed"], counts["interrupted"], counts["not run"],
+              stem.c_str(), stem.c_str());
+  if (interruptRequested())
+    throw CancelledError("results of the jobs that ran written to " + stem + ".csv; --skip-existing resumes");
+  if (counts["failed"] + counts["interrupted"] > 0) throw CLI::RuntimeError(1);
 }
 
 }  // namespace

@@ -43,6 +43,7 @@ struct RenderOptions {
   double timeBudget = 0.0;
   std::string field;              // --field: a .vdb to render with (voxcone)
   double memoryBudgetMb = -1.0;   // --memory-budget-mb (voxcone); -1: not given
+  bool writePartial = false;      // --write-partial: an interrupted render writes its complete passes
   bool quiet = false;
 };
 
@@ -177,8 +178,12 @@ void runRender(const RenderOptions& o) {
     t.reset();
     integrator->prepare(&progress);
     prepareSec = t.seconds();
-    result = renderImage(scene, *integrator, settings, &progress);
+    result = renderImage(scene, *integrator, settings, &progress, o.writePartial);
   }
+  // Interrupted with --write-partial: the image holds the passes that completed, written as a
+  // complete set that says so (sidecar "partial", EXR voxcone:partial, spp the samples taken).
+  const int requestedSpp = settings.spp;
+  if (result.partial) settings.spp = result.completedSpp;
 
   nlohmann::json meta;
   meta["voxcone_version"] = "0.1.0";
@@ -189,6 +194,10 @@ void runRender(const RenderOptions& o) {
                       {"sampler", samplerNames()[size_t(settings.sampler)]}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
+  if (result.partial) {
+    meta["partial"] = true;
+    meta["requested_spp"] = requestedSpp;
+  }
   meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"pilot_seconds", pilotSec},
                      {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds},
                      {"render_stage_seconds", result.stageSeconds}};
@@ -232,7 +241,14 @@ void runRender(const RenderOptions& o) {
   meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};
   writeJsonAtomic(jsonPath, meta, &files);
   files.commit(jsonPath);
-  std::printf("wrote %s (%s, %s)\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str());
+  std::printf("wrote %s (%s, %s)%s\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str(),
+              result.partial ? ", partial" : "");
+  if (result.partial) {
+    char what[512];
+    std::snprintf(what, sizeof what, "wrote a partial image of %d of %d spp to %s", settings.spp, requestedSpp,
+                  exrPath.c_str());
+    throw CancelledError(what);
+  }
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
               settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());
   if (autoSettings && !autoReport.value("met", true)) {
@@ -287,6 +303,11 @@ void addRenderCommand(CLI::App& app) {
                   "voxcone: refuse a voxel level whose estimated memory exceeds this many MB, before allocating (0: no "
                   "budget; default: the machine's available memory)")
       ->check(CLI::Range(0.0, 1e12));
+  cmd->add_flag("--write-partial", o->writePartial,
+                "On SIGINT/SIGTERM write the samples taken so far (whole passes of every pixel) as a complete "
+                "image marked partial, with its spp; the exit status still says interrupted (128 + the signal). "
+                "Not for voxcone, whose samples are one pass")
+      ->default_val(false);
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

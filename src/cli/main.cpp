@@ -64,9 +64,11 @@ int main(int argc, char** argv) {
   } catch (const voxcone::NotMetError& e) {
     std::fprintf(stderr, "voxcone: not met: %s\n", printable(e.what()).c_str());
     return 3;
-  } catch (const voxcone::CancelledError&) {
-    std::fprintf(stderr, "voxcone: interrupted; no output written\n");
-    return 130;
+  } catch (const voxcone::CancelledError& e) {
+    // 128 + the signal, as a shell reports a process it killed: schedulers and batch read it.
+    const std::string what = e.what();
+    std::fprintf(stderr, "voxcone: interrupted; %s\n", what == "cancelled" ? "no output written" : printable(e.what()).c_str());
+    return voxcone::interruptedExitCode();
   } catch (const voxcone::Error& e) {
     std::fprintf(stderr, "voxcone: error: %s\n", printable(e.what()).c_str());
     return 2;

@@ -7,8 +7,12 @@
 namespace voxcone {
 
 namespace {
-volatile std::sig_atomic_t g_interrupted = 0;
-extern "C" void onInterrupt(int) { g_interrupted = 1; }
+volatile std::sig_atomic_t g_interrupted = 0;  // the first signal's number
+extern "C" void onInterrupt(int sig) {
+  if (!g_interrupted) g_interrupted = sig;
+}
+
+}  // namespace
 
 std::string formatDuration(double sec) {
   if (!(sec >= 0.0) || sec > 1e7) return "--:--";
@@ -20,7 +24,6 @@ std::string formatDuration(double sec) {
     std::snprintf(buf, sizeof(buf), "%02ld:%02ld", s / 60, s % 60);
   return buf;
 }
-}  // namespace
 
 void installInterruptHandler() {
   std::signal(SIGINT, onInterrupt);
@@ -28,6 +31,10 @@ void installInterruptHandler() {
 }
 
 bool interruptRequested() { return g_interrupted != 0; }
+
+int interruptSignal() { return g_interrupted; }
+
+int interruptedExitCode() { return 128 + (g_interrupted ? int(g_interrupted) : SIGINT); }
 
 ConsoleProgress::ConsoleProgress(bool quiet, double lineIntervalSec)
     : m_quiet(quiet), m_tty(isatty(fileno(stderr)) != 0), m_interval(lineIntervalSec) {}

@@ -113,19 +113,103 @@ void runGathers(const Integrator& integrator, const std::vector<PendingGather>& 
   // Pixels without a gather add zero.
   for (size_t p = 0; p < sum.size(); ++p) ib.indirect[p] += Vec3(sum[p] / double(spp));
 }
+
+/// Samples per pass of a render without the indirect filter: 1, 1, 2, 4, ... up to 64, so that
+/// an interrupted render keeps complete passes of every pixel (at most 64 samples lost) and a
+/// short one pays few passes. A pure function of spp: the same passes on every machine.
+std::vector<int> passSizes(int spp) {
+  std::vector<int> sizes;
+  for (int done = 0, next = 1; done < spp; done += sizes.back()) {
+    sizes.push_back(std::min(next, spp - done));
+    if (sizes.size() > 1) next = std::min(2 * next, 64);
+  }
+  return sizes;
+}
+
+/// renderImage without the indirect filter, in passes over every pixel (passSizes). Each pixel
+/// sums its samples in sample order into one double sum whatever the passes, so the image is
+/// the one a single pass gives, bit for bit. Cancellation is checked at every pixel of every
+/// pass (a pixel's share of a pass is at most 64 samples: milliseconds), so a render stops
+/// within a fraction of a second at any spp; with keepPartial it then returns the passes that
+/// completed as an image of fewer samples (RenderResult::partial), else throws CancelledError.
+RenderResult renderPasses(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                          Progress* progress, bool keepPartial) {
+  constexpr int kTile = 16;
+  const int w = settings.width, h = settings.height;
+  const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
+  const size_t n = size_t(w) * size_t(h);
+  std::vector<DVec3> sum(n, DVec3(0.0)), complete;  // complete: the sums after the last whole pass
+  std::atomic<uint64_t> invalid{0};
+  uint64_t invalidComplete = 0;
+  std::atomic<bool> cancelled{false};
+  const std::vector<int> passes = passSizes(settings.spp);
+  if (progress) progress->start("render", uint64_t(tilesX) * uint64_t(tilesY) * passes.size());
+  Timer timer;
+  int doneSpp = 0;
+  for (const int passSpp : passes) {
+    tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
+      const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
+      uint64_t bad = 0;
+      for (int y = y0; y < std::min(y0 + kTile, h); ++y)
+        for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
+          if (cancelled.load(std::memory_order_relaxed)) return;
+          if (progress && progress->cancelled()) {
+            cancelled = true;
+            return;
+          }
+          const size_t pixel = size_t(y) * size_t(w) + size_t(x);
+          Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
+          for (int s = doneSpp; s < doneSpp + passSpp; ++s) {
+            sampler.startSample(static_cast<uint32_t>(s));
+            const Vec2 jitter = sampler.uniform2();
+            const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
+            const Vec3 L = integrator.li(ray, sampler);
+            if (!usableRadiance(L)) ++bad;
+            else sum[pixel] += DVec3(L);
+          }
+        }
+      invalid += bad;
+      if (progress) progress->advance(1);
+    });
+    if (cancelled) break;
+    doneSpp += passSpp;
+    if (keepPartial && doneSpp < settings.spp) {
+      complete = sum;
+      invalidComplete = invalid;
+    }
+  }
+  RenderResult result;
+  result.image = Image(w, h);
+  result.completedSpp = doneSpp;
+  if (cancelled) {
+    if (!keepPartial || doneSpp == 0) throw CancelledError();
+    sum.swap(complete);
+    invalid = invalidComplete;
+    result.partial = true;
+  }
+  if (progress) progress->finish();
+  for (size_t p = 0; p < n; ++p) result.image.pixels[p] = Vec3(sum[p] / double(doneSpp));
+  result.stageSeconds["samples"] = timer.seconds();
+  result.seconds = timer.seconds();
+  result.samples = uint64_t(n) * uint64_t(doneSpp);
+  result.invalidSamples = invalid;
+  return result;
+}
 }  // namespace
 
 void Integrator::linkIndirect(IndirectBuffer& buffer) const { buffer.link.assign(buffer.indirect.size(), 0u); }
 
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                         Progress* progress) {
+                         Progress* progress, bool keepPartial) {
   settings.validate();
+  const int filterRadius = integrator.indirectFilterRadius();
+  const bool split = filterRadius > 0;
+  if (!split) return renderPasses(scene, integrator, settings, progress, keepPartial);
   constexpr int kTile = 16;
   const int w = settings.width, h = settings.height;
   const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
-  const int filterRadius = integrator.indirectFilterRadius();
-  const bool split = filterRadius > 0;
   RenderResult result;
+  result.completedSpp = settings.spp;
   result.image = Image(w, h);
   IndirectBuffer ib;
   if (split) {
@@ -158,6 +242,11 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     std::vector<EdgeSample> pixelSamples;
     for (int y = y0; y < std::min(y0 + kTile, h); ++y)
       for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
+        // Checked at every pixel: a tile of many samples per pixel is seconds of work.
+        if (progress && progress->cancelled()) {
+          cancelled = true;
+          return;
+        }
         const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
         Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
         // Sum in double so the mean does not depend on float rounding of a long sum.

@@ -10,9 +10,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
+#include <vector>
 
 namespace voxcone {
 namespace {
@@ -40,6 +43,102 @@ fs::path freshDir(const std::string& name) {
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
+}
+
+/// Start `voxcone ARGS...` (stdout and stderr to files in `dir`); returns its pid.
+pid_t spawn(const std::vector<std::string>& args, const fs::path& dir) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    std::freopen((dir / "stdout.txt").c_str(), "w", stdout);
+    std::freopen((dir / "stderr.txt").c_str(), "w", stderr);
+    std::vector<char*> argv = {const_cast<char*>(VOXCONE_CLI_PATH)};
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(VOXCONE_CLI_PATH, argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+/// CPU seconds process `pid` has used (user + system), from /proc.
+double cpuSeconds(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const size_t close = stat.rfind(')');
+  if (close == std::string::npos) return 0.0;
+  std::istringstream rest(stat.substr(close + 2));
+  std::string field;
+  double ticks = 0.0;
+  for (int i = 3; i <= 15 && rest >> field; ++i)
+    if (i == 14 || i == 15) ticks += std::stod(field);  // utime, stime
+  return ticks / double(::sysconf(_SC_CLK_TCK));
+}
+
+/// Wait for `pid` (up to a minute, so that a slow machine passes) and return its exit status,
+/// -1 when it did not exit.
+int waitExit(pid_t pid) {
+  int status = 0;
+  for (int i = 0; i < 600; ++i) {
+    if (::waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    ::usleep(100000);
+  }
+  ::kill(pid, SIGKILL);
+  ::waitpid(pid, &status, 0);
+  return -1;
+}
+
+/// A path-traced render of a million samples per pixel (hours), started and signalled once it
+/// has rendered for `cpu` CPU seconds (past loading whatever the machine's speed).
+pid_t signalledRender(const fs::path& dir, bool writePartial, int sig, double cpu = 0.5) {
+  std::vector<std::string> args = {"render", test::sourceDir() + "/data/scenes/cornell-box.json", "--method", "path",
+                                   "--spp", "1000000", "--res", "16x16", "-t", "1", "-q", "-o", (dir / "img").string()};
+  if (writePartial) args.push_back("--write-partial");
+  const pid_t pid = spawn(args, dir);
+  for (int i = 0; i < 600 && cpuSeconds(pid) < cpu; ++i) ::usleep(50000);
+  ::kill(pid, sig);
+  return pid;
+}
+
+TEST(Cli, InterruptedRenderWritesNothingAndSaysSo) {
+  // SIGINT / SIGTERM at a million spp (one 16x16 tile: it used to be honoured only between
+  // tiles, i.e. never): 128 + the signal, no file, no temporary.
+  for (int sig : {SIGINT, SIGTERM}) {
+    const fs::path d = freshDir("cli_interrupt_" + std::to_string(sig));
+    const int code = waitExit(signalledRender(d, false, sig));
+    EXPECT_EQ(code, 128 + sig);
+    std::ifstream f(d / "stderr.txt");
+    const std::string err((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    EXPECT_NE(err.find("interrupted; no output written"), std::string::npos) << err;
+    for (const auto& e : fs::directory_iterator(d))
+      EXPECT_TRUE(e.path().filename() == "stdout.txt" || e.path().filename() == "stderr.txt") << e.path();
+  }
+}
+
+TEST(Cli, WritePartialWritesTheCompletePassesAsAnImageOfFewerSamples) {
+  const fs::path d = freshDir("cli_partial");
+  const int code = waitExit(signalledRender(d, true, SIGTERM));
+  EXPECT_EQ(code, 128 + SIGTERM);  // still "interrupted", with the image written
+  std::ifstream f(d / "img.json");
+  ASSERT_TRUE(f) << "no sidecar";
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_EQ(j.value("partial", false), true);
+  EXPECT_EQ(j["requested_spp"], 1000000);
+  const int spp = j["settings"]["spp"];
+  EXPECT_GE(spp, 1);
+  EXPECT_LT(spp, 1000000);
+  // Passes of 1, 1, 2, 4, ... 64: spp is a sum of whole passes.
+  int sum = 0, next = 1, passes = 0;
+  while (sum < spp) {
+    sum += next;
+    if (++passes > 1) next = std::min(2 * next, 64);
+  }
+  EXPECT_EQ(sum, spp);
+  // The partial image is the render of that many samples, bit for bit.
+  const RunResult full = run("render " + test::sourceDir() + "/data/scenes/cornell-box.json --method path --res 16x16 -t 2 -q --spp " +
+                             std::to_string(spp) + " -o " + (d / "full").string());
+  ASSERT_EQ(full.code, 0) << full.err;
+  const Image a = readImage((d / "img.exr").string()), b = readImage((d / "full.exr").string());
+  EXPECT_TRUE(a.pixels == b.pixels);
 }
 
 TEST(Cli, RenderWritesExrPngAndSidecar) {

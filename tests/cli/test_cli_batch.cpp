@@ -103,6 +103,45 @@ TEST_F(Batch, ARenderDiesWithItsBatch) {
   EXPECT_TRUE(gone) << "the render outlived its batch";
 }
 
+TEST_F(Batch, SigtermStopsTheRendersAndRecordsThemInterrupted) {
+  // SIGTERM to the batch alone (kill PID, not the process group): it passes it on to the render
+  // running, records that job "interrupted" (no outputs: --skip-existing reruns it) and the one
+  // not started "not run", writes its tables and exits 128 + SIGTERM.
+  const std::string tag = "sigterm-" + std::to_string(::getpid());
+  const std::string manifest = writeManifest(
+      {{"defaults", {{"scene", test::sourceDir() + "/data/scenes/cornell-box.json"}, {"res", "16x16"}, {"method", "path"}}},
+       {"jobs", {{{"name", tag}, {"spp", 1 << 20}}, {{"name", "after"}, {"spp", 1}}}}});
+  const pid_t batch = ::fork();
+  ASSERT_GE(batch, 0);
+  if (batch == 0) {
+    const std::string out = path("runs");
+    std::freopen(path("batch-stderr.txt").c_str(), "w", stderr);
+    ::execl(VOXCONE_CLI_PATH, VOXCONE_CLI_PATH, "batch", manifest.c_str(), "-o", out.c_str(), "-j", "1", "-t", "1",
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  std::vector<pid_t> renders;
+  for (int i = 0; i < 600 && renders.empty(); ++i) {
+    ::usleep(100000);
+    for (pid_t p : processesWith(tag))
+      if (p != batch) renders.push_back(p);
+  }
+  ASSERT_FALSE(renders.empty()) << "the render never started";
+  ::usleep(300000);
+  ::kill(batch, SIGTERM);
+  int status = 0;
+  for (int i = 0; i < 600 && ::waitpid(batch, &status, WNOHANG) != batch; ++i) ::usleep(100000);
+  ASSERT_TRUE(WIFEXITED(status)) << "the batch did not stop";
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGTERM);
+  const nlohmann::json results = readJson(path("runs/results.json"));
+  ASSERT_EQ(results["rows"].size(), 2u);
+  EXPECT_EQ(results["rows"][0]["status"], "interrupted");
+  EXPECT_EQ(results["rows"][0]["error"], "stopped by SIGTERM");
+  EXPECT_EQ(results["rows"][1]["status"], "not run");
+  EXPECT_FALSE(fs::exists(path("runs/" + tag + ".exr")));
+  for (pid_t p : renders) EXPECT_NE(::kill(p, 0), 0) << "the render outlived its batch";
+}
+
 TEST_F(Batch, GridExpandsIntoNamedJobsAndParallelEqualsSerial) {
   const std::string manifest = writeManifest(gridManifest());
   ASSERT_EQ(run("batch " + manifest + " --dry-run"), 0);

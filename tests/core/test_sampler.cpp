@@ -89,14 +89,33 @@ TEST(Sampler, SlotsAndPixelsAreDecorrelatedAndDeterministic) {
   EXPECT_EQ(d.uniform2(), a0);
 }
 
-TEST(Sampler, IndependentIsThePixelsPcgStream) {
-  Sampler s(SamplerKind::Independent, 9, 77);
-  Rng rng(9, 77);
+TEST(Sampler, IndependentSamplesAreTheirOwnPcgStreams) {
+  // Sample i of a pixel does not depend on the samples drawn before it (renders take them in
+  // passes, with a new Sampler each pass); samples, pixels and seeds differ.
+  Sampler s(SamplerKind::Independent, 9, 77), t(SamplerKind::Independent, 9, 77);
+  Sampler otherPixel(SamplerKind::Independent, 9, 78), otherSeed(SamplerKind::Independent, 10, 77);
+  std::vector<Vec2> first;
   for (int i = 0; i < 4; ++i) {
     s.startSample(uint32_t(i));
-    EXPECT_EQ(s.uniform2(), rng.uniform2());
-    EXPECT_EQ(s.uniform(), rng.uniform());
+    first.push_back(s.uniform2());
+    s.uniform();
   }
+  for (int i = 3; i >= 0; --i) {
+    t.startSample(uint32_t(i));
+    EXPECT_EQ(t.uniform2(), first[size_t(i)]);
+  }
+  EXPECT_NE(first[0], first[1]);
+  otherPixel.startSample(0);
+  otherSeed.startSample(0);
+  EXPECT_NE(otherPixel.uniform2(), first[0]);
+  EXPECT_NE(otherSeed.uniform2(), first[0]);
+  // Within a sample the values are a PCG stream: uniform on [0, 1), mean 1/2.
+  double mean = 0.0;
+  for (int i = 0; i < 4096; ++i) {
+    s.startSample(uint32_t(i));
+    mean += s.uniform();
+  }
+  EXPECT_NEAR(mean / 4096.0, 0.5, 0.02);
 }
 
 TEST(Sampler, KindsByName) {

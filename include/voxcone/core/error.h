@@ -49,6 +49,7 @@ public:
 class CancelledError : public Error {
 public:
   CancelledError() : Error("cancelled") {}
+  explicit CancelledError(const std::string& what) : Error(what) {}
 };
 
 }  // namespace voxcone

@@ -47,9 +47,17 @@ private:
   std::chrono::steady_clock::time_point m_start, m_lastDraw;
 };
 
+/// A duration as MM:SS, or H:MM:SS from an hour on; "--:--" when unknown or absurd.
+std::string formatDuration(double sec);
+
 /// Install SIGINT/SIGTERM handlers that make every ConsoleProgress report `cancelled()`.
 void installInterruptHandler();
 /// True once SIGINT or SIGTERM arrived.
 bool interruptRequested();
+/// The signal that asked to stop (SIGINT or SIGTERM), 0 when none did.
+int interruptSignal();
+/// The exit status of a process stopped by interruptSignal(): 128 + the signal, as a shell
+/// reports a process the signal killed (130 SIGINT, 143 SIGTERM); 130 when none arrived.
+int interruptedExitCode();
 
 }  // namespace voxcone

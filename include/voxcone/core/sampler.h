@@ -105,7 +105,7 @@ public:
   /// samples weight it by this count).
   Sampler(SamplerKind kind, uint64_t seed, uint64_t pixel, uint32_t samplesPerPixel = 1)
       : m_kind(kind), m_rng(seed, pixel), m_pixelKey(mixBits(mixBits(seed) ^ (pixel + 0x632be59bd9b4e019ULL))),
-        m_samplesPerPixel(samplesPerPixel) {}
+        m_pixel(pixel), m_samplesPerPixel(samplesPerPixel) {}
 
   SamplerKind kind() const { return m_kind; }
   /// The index of the current sample (startSample's argument).
@@ -115,6 +115,10 @@ public:
 
   /// Begin the pixel's sample `index` (0, 1, ... spp-1), at dimension 0.
   void startSample(uint32_t index) {
+    // Independent: each sample its own PCG stream (pixel, and the pixel's key with the index),
+    // so that sample i never depends on the samples drawn before it (renders in passes).
+    if (m_kind == SamplerKind::Independent)
+      m_rng.setStream(mixBits(m_pixelKey + 0x9e3779b97f4a7c15ULL * (uint64_t(index) + 1)), m_pixel);
     m_index = index;
     m_reversedIndex = reverseBits32(index);
     m_dimension = 0;
@@ -152,6 +156,7 @@ private:
   SamplerKind m_kind;
   Rng m_rng;
   uint64_t m_pixelKey;
+  uint64_t m_pixel;
   uint32_t m_samplesPerPixel = 1;
   uint32_t m_index = 0;
   uint32_t m_reversedIndex = 0;  ///< m_index bit-reversed, once per sample

@@ -112,6 +112,8 @@ struct RenderResult {
   /// deferred gathers ("gathering"; "unfilled": those only because no neighbour gathers), and
   /// the gathers run ("gathers").
   nlohmann::json filterStats = nlohmann::json::object();
+  int completedSpp = 0;   ///< samples per pixel in the image (below settings.spp when partial)
+  bool partial = false;   ///< interrupted: the image holds the passes that completed
 };
 
 /// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its samples from
@@ -126,10 +128,14 @@ struct RenderResult {
 /// (IndirectSplit::deferred) run after every pixel's samples, at one pixel per
 /// gatherSpacing() block (chosen per block from the seed), at every edge pixel that cannot take
 /// its light that way, and at every pixel with no gathering pixel among its filter
-/// neighbours; the filter then fills the others from their neighbours. Throws CancelledError
-/// when `progress` reports cancellation.
+/// neighbours; the filter then fills the others from their neighbours.
+/// Without the indirect filter the samples are taken in passes over all pixels (1, 1, 2, 4, ...
+/// up to 64 samples each; the image is the same bit for bit): cancellation is seen within a
+/// fraction of a second at any spp, and with `keepPartial` the render then returns the passes
+/// that completed (RenderResult::partial, completedSpp) instead of throwing. Otherwise (and
+/// with the filter, whose samples are one pass) cancellation throws CancelledError.
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                         Progress* progress = nullptr);
+                         Progress* progress = nullptr, bool keepPartial = false);
 
 /// Samples of `integrator`'s li at `pixels` (indices y * width + x): `settings.spp` each, drawn
 /// as renderImage draws them (the same sampler, seed and jitter), no indirect filter; their sum
