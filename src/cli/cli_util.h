@@ -36,11 +36,24 @@ void signalChildren(int sig);
 /// Path of the running voxcone executable.
 std::string selfExe();
 
+/// Where a study's batch runs: here, or as a Slurm job array (`batch --slurm --wait`, then its
+/// --merge), with these submission settings.
+struct StudyScheduler {
+  bool slurm = false;
+  std::string partition;  ///< --partition, "" for the cluster's default
+  std::string timeLimit;  ///< --time per task, "" for the partition's
+  int shards = 0;         ///< array tasks, 0: one per job
+};
+
 /// A study's renders: write `manifest` to outDir/manifest.json, run it as a resumable batch
-/// (`voxcone batch --skip-existing`, finished renders kept) into outDir/runs, and return its
-/// results.json. Failed jobs are in the rows; throws Error when the batch itself fails.
+/// (`voxcone batch --skip-existing`, finished renders kept) into outDir/runs, here or on Slurm,
+/// and return its results.json (the batch's, or the shards' merged: the same rows). Failed jobs
+/// are in the rows; throws Error when the batch itself fails.
 nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& outDir, int jobsInFlight,
-                             int threadsPerJob);
+                             int threadsPerJob, const StudyScheduler& scheduler = {});
+
+/// Add --slurm, --partition, --time and --shards to a study command.
+void addSchedulerOptions(CLI::App& cmd, StudyScheduler& scheduler);
 
 /// Run a chart script (python3-matplotlib) on STUDY.json writing OUT_STEM.{png,svg}; prints
 /// what it says. Throws Error with its first line when it fails.

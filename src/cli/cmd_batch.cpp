@@ -45,6 +45,16 @@ struct BatchOptions {
   double memoryBudgetMb = 0.0;
   bool dryRun = false;
   bool quiet = false;
+  // Slurm (--slurm submits the manifest as a job array; --status and --merge read what its
+  // shards wrote).
+  bool slurm = false;
+  bool wait = false;
+  std::string partition;
+  std::string timeLimit;
+  int arrayLimit = 0;
+  int shards = 0;
+  bool status = false;
+  bool merge = false;
 };
 
 /// Keys a job (or a grid entry, or the defaults) may set.
@@ -321,6 +331,26 @@ nlohmann::json jobMetrics(const Job& job, const fs::path& outDir, std::map<std::
   }
 }
 
+/// A finished job's sidecar and metrics into `r`. A job whose metrics cannot be computed (its
+/// image and the reference differ in size or kind, the reference is unreadable) has failed,
+/// not passed.
+void readOutputs(const Job& job, const fs::path& outDir, std::map<std::string, Image>& refs, std::mutex& refsMutex,
+                 JobResult& r) {
+  const fs::path sidecar = outDir / (job.name + ".json");
+  try {
+    std::ifstream f(sidecar);
+    r.sidecar = nlohmann::json::parse(f);
+    r.metrics = jobMetrics(job, outDir, refs, refsMutex);
+    if (r.metrics.is_object() && r.metrics.contains("error")) {
+      r.status = "failed";
+      r.error = "metrics: " + r.metrics["error"].get<std::string>();
+    }
+  } catch (const std::exception& e) {
+    r.status = "failed";
+    r.error = "cannot read " + sidecar.string() + ": " + e.what();
+  }
+}
+
 /// A CSV field, quoted when it holds a comma, a quote or a line break.
 std::string csvField(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
@@ -392,6 +422,133 @@ void writeTables(const std::vector<nlohmann::json>& rows, const std::string& ste
   });
 }
 
+/// The sbatch script of a manifest's job array: task i runs shard i/N of the manifest with
+/// --skip-existing, so a task requeued or resubmitted by hand (sbatch --array=i SCRIPT) runs
+/// exactly the jobs it is missing. N is written into the script, not read from
+/// SLURM_ARRAY_TASK_COUNT, which a subset resubmitted by hand would change.
+std::string slurmScript(const BatchOptions& o, const std::string& manifest, const fs::path& outDir, size_t shards) {
+  const std::string stem = fs::path(manifest).stem().string();
+  std::ostringstream s;
+  s << "#!/bin/sh\n";
+  s << "#SBATCH --job-name=voxcone-" << slug(stem) << "\n";
+  s << "#SBATCH --array=0-" << shards - 1;
+  if (o.arrayLimit > 0) s << "%" << o.arrayLimit;
+  s << "\n";
+  s << "#SBATCH --output=" << (outDir / "slurm").string() << "/%x-%A_%a.log\n";
+  s << "#SBATCH --open-mode=append\n";
+  s << "#SBATCH --requeue\n";
+  if (o.threadsPerJob > 0) s << "#SBATCH --cpus-per-task=" << o.threadsPerJob * std::max(1, o.jobsInFlight) << "\n";
+  if (!o.partition.empty()) s << "#SBATCH --partition=" << o.partition << "\n";
+  if (!o.timeLimit.empty()) s << "#SBATCH --time=" << o.timeLimit << "\n";
+  s << "# Written by 'voxcone batch --slurm'; it may also be submitted by hand: sbatch THIS_FILE\n";
+  s << "# (one task: sbatch --array=I THIS_FILE). Join the shards' results: voxcone batch MANIFEST -o OUT --merge\n";
+  s << "exec " << shellQuote(selfExe()) << " batch " << shellQuote(manifest) << " -o " << shellQuote(outDir.string())
+    << " --shard \"${SLURM_ARRAY_TASK_ID}/" << shards << "\" --skip-existing -q -j " << o.jobsInFlight << " -t "
+    << o.threadsPerJob;
+  if (o.memoryBudgetMb > 0.0) s << " --memory-budget-mb " << o.memoryBudgetMb;
+  s << "\n";
+  return s.str();
+}
+
+/// Run `cmd`, its stdout and stderr; Error naming `what` when it fails.
+std::string runOrThrow(const std::string& cmd, const std::string& what) {
+  std::string out;
+  const int code = runCapture(cmd + " 2>&1", out);
+  if (code == 127) throw Error(what + ": command not found (is Slurm installed here?)");
+  if (code != 0) throw Error(what + " failed (exit status " + std::to_string(code) + "): " + lastLine(out));
+  return out;
+}
+
+/// Write the array's script beside the outputs and submit it; returns the job id.
+std::string submitSlurm(const BatchOptions& o, const std::string& manifest, const fs::path& outDir, size_t jobs) {
+  const size_t shards = o.shards > 0 ? std::min(size_t(o.shards), jobs) : jobs;
+  fs::create_directories(outDir / "slurm");
+  const std::string script = (outDir / "slurm" / (fs::path(manifest).stem().string() + ".sbatch")).string();
+  writeFileAtomic(script, [&](const std::string& tmp) {
+    std::ofstream f(tmp);
+    f << slurmScript(o, manifest, outDir, shards);
+    if (!f) throw Error("cannot write " + tmp);
+  });
+  fs::permissions(script, fs::perms::owner_exec | fs::perms::group_exec, fs::perm_options::add);
+  const std::string out = runOrThrow("sbatch --parsable " + shellQuote(script), "sbatch");
+  // --parsable: "JOBID" or "JOBID;CLUSTER".
+  static const std::regex kId("([0-9]+)(;[^\\s]*)?\\s*$");
+  std::smatch m;
+  if (!std::regex_search(out, m, kId)) throw Error("sbatch gave no job id: " + lastLine(out));
+  const std::string id = m[1];
+  std::printf("submitted job array %s: %zu tasks over %zu jobs, script %s\n", id.c_str(), shards, jobs, script.c_str());
+  std::fflush(stdout);
+  return id;
+}
+
+/// Until job `id` has left the queue (every task finished, a requeued one included).
+void waitForSlurmJob(const std::string& id) {
+  for (;;) {
+    std::string out;
+    const int code = runCapture("squeue -h -j " + id + " -o %i 2>/dev/null", out);
+    if (code == 0 && out.find_first_not_of(" \n") == std::string::npos) return;
+    if (interruptRequested()) throw CancelledError("stopped waiting; the job array " + id + " keeps running");
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+  }
+}
+
+/// The manifest's jobs as the shards left them: a job whose outputs are complete is "ok" (its
+/// row read from its sidecar, its metrics computed again), whatever a shard's table says (a task
+/// killed after a job but before its table was written); otherwise the reason from the newest
+/// shard table that lists it (failed, interrupted, not run), or "missing". Writes the joined
+/// results.{csv,json} when `write`; prints a summary and the jobs not complete. Exit 1 unless
+/// every job is complete.
+void mergeShards(const BatchOptions& o, const std::vector<Job>& jobs, const fs::path& outDir, bool write) {
+  std::map<std::string, std::pair<fs::file_time_type, nlohmann::json>> reported;  // name -> newest row
+  std::error_code ec;
+  if (fs::is_directory(outDir, ec))
+    for (const auto& e : fs::directory_iterator(outDir)) {
+      const std::string file = e.path().filename().string();
+      if (file.rfind("results-shard-", 0) != 0 || e.path().extension() != ".json") continue;
+      try {
+        std::ifstream f(e.path());
+        const nlohmann::json doc = nlohmann::json::parse(f);
+        const auto when = fs::last_write_time(e.path());
+        for (const nlohmann::json& row : doc.at("rows")) {
+          const std::string name = row.at("name");
+          auto it = reported.find(name);
+          if (it == reported.end() || it->second.first < when) reported[name] = {when, row};
+        }
+      } catch (const std::exception& ex) {
+        std::fprintf(stderr, "voxcone: warning: skipping %s: %s\n", e.path().string().c_str(), ex.what());
+      }
+    }
+  std::vector<nlohmann::json> rows;
+  std::map<std::string, size_t> counts;
+  std::map<std::string, Image> refs;
+  std::mutex refsMutex;
+  std::vector<std::string> notComplete;
+  for (const Job& job : jobs) {
+    JobResult r;
+    if (completeOutputs(outDir, job.name)) {
+      r.status = "ok";
+      readOutputs(job, outDir, refs, refsMutex, r);
+    } else {
+      auto it = reported.find(job.name);
+      const std::string said = it != reported.end() ? it->second.second.value("status", "") : "";
+      r.status = said.empty() || said == "ok" || said == "existing" ? "missing" : said;
+      r.error = it != reported.end() ? it->second.second.value("error", "") : "no shard has run it";
+      if (r.status == "missing" && !said.empty()) r.error = "its outputs are gone or incomplete";
+    }
+    if (r.status != "ok") notComplete.push_back(job.name + ": " + r.status + (r.error.empty() ? "" : " (" + r.error + ")"));
+    ++counts[r.status];
+    rows.push_back(resultRow(job, r));
+  }
+  const std::string stem = (outDir / "results").string();
+  if (write)
+    writeTables(rows, stem, {{"manifest", fs::absolute(o.manifestPath).string()}, {"merged", true}});
+  std::printf("%s: %zu jobs: %zu complete, %zu failed, %zu interrupted, %zu not run, %zu missing%s\n",
+              write ? "merge" : "status", jobs.size(), counts["ok"], counts["failed"], counts["interrupted"],
+              counts["not run"], counts["missing"], write ? ("; wrote " + stem + ".csv, " + stem + ".json").c_str() : "");
+  for (const std::string& line : notComplete) std::printf("  %s\n", line.c_str());
+  if (!notComplete.empty()) throw CLI::RuntimeError(1);
+}
+
 void runBatch(const BatchOptions& o) {
   nlohmann::json manifest;
   {
@@ -410,6 +567,26 @@ void runBatch(const BatchOptions& o) {
                         : manifest.contains("output_dir") && manifest["output_dir"].is_string()
                               ? fs::path(resolvePath(base, manifest["output_dir"].get<std::string>()))
                               : base / fs::path(o.manifestPath).stem();
+  if (int(o.slurm) + int(o.status) + int(o.merge) + int(!o.shard.empty()) > 1)
+    throw SettingsError("--slurm, --status, --merge and --shard are one at a time");
+  if (o.wait && !o.slurm) throw SettingsError("--wait goes with --slurm");
+  if (o.status || o.merge) {
+    mergeShards(o, jobs, outDir, o.merge);
+    return;
+  }
+  if (o.slurm) {
+    if (o.dryRun) {
+      std::printf("%s", slurmScript(o, fs::absolute(o.manifestPath).string(), fs::absolute(outDir),
+                                    o.shards > 0 ? std::min(size_t(o.shards), jobs.size()) : jobs.size())
+                            .c_str());
+      return;
+    }
+    const std::string id = submitSlurm(o, fs::absolute(o.manifestPath).string(), fs::absolute(outDir), jobs.size());
+    if (!o.wait) return;
+    waitForSlurmJob(id);
+    mergeShards(o, jobs, outDir, true);
+    return;
+  }
   std::string stem = (outDir / "results").string();
   // This shard's jobs: index % N == I, in manifest order (every machine expands the same list).
   if (!o.shard.empty()) {
@@ -454,7 +631,6 @@ void runBatch(const BatchOptions& o) {
           for (size_t k = range.begin(); k != range.end(); ++k) {
             const Job& job = jobs[k];
             JobResult& r = results[k];
-            const fs::path sidecar = outDir / (job.name + ".json");
             if (interruptRequested()) {
               r.status = "not run";
               r.error = "interrupted";
@@ -462,22 +638,7 @@ void runBatch(const BatchOptions& o) {
             }
             if (o.skipExisting && completeOutputs(outDir, job.name)) r.status = "existing";
             else r = runJob(job, outDir, o);
-            if (r.status == "ok" || r.status == "existing") {
-              try {
-                std::ifstream f(sidecar);
-                r.sidecar = nlohmann::json::parse(f);
-                r.metrics = jobMetrics(job, outDir, refs, refsMutex);
-                // A job whose metrics cannot be computed (its image and the reference differ
-                // in size or kind, the reference is unreadable) has failed, not passed.
-                if (r.metrics.is_object() && r.metrics.contains("error")) {
-                  r.status = "failed";
-                  r.error = "metrics: " + r.metrics["error"].get<std::string>();
-                }
-              } catch (const std::exception& e) {
-                r.status = "failed";
-                r.error = "cannot read " + sidecar.string() + ": " + e.what();
-              }
-            }
+            if (r.status == "ok" || r.status == "existing") readOutputs(job, outDir, refs, refsMutex, r);
             std::lock_guard<std::mutex> lock(printMutex);
             ++finished;
             if (!o.quiet) {
@@ -528,6 +689,20 @@ void addBatchCommand(CLI::App& app) {
       ->check(positiveNumber());
   cmd->add_flag("--dry-run", o->dryRun, "Print the expanded jobs (name and settings) and exit");
   cmd->add_flag("-q,--quiet", o->quiet, "No per-job lines");
+  cmd->add_flag("--slurm", o->slurm,
+                "Submit the manifest to Slurm as a job array (one task per shard, each 'batch --shard I/N "
+                "--skip-existing'); the sbatch script is written to OUT/slurm/ and the job id printed");
+  cmd->add_option("--shards", o->shards, "--slurm: array tasks (default: one per job)")->check(CLI::Range(1, 1000000));
+  cmd->add_option("--partition", o->partition, "--slurm: the partition to submit to");
+  cmd->add_option("--time", o->timeLimit, "--slurm: each task's time limit (Slurm's format, e.g. 30:00)");
+  cmd->add_option("--array-limit", o->arrayLimit, "--slurm: at most this many tasks running at once")
+      ->check(CLI::Range(1, 1000000));
+  cmd->add_flag("--wait", o->wait, "--slurm: wait for the array to finish, then --merge");
+  cmd->add_flag("--status", o->status, "Which jobs are complete, failed, interrupted or missing (from the outputs "
+                                       "and the shards' tables); exit 1 unless all are complete");
+  cmd->add_flag("--merge", o->merge, "Join the shards' results into OUT/results.{csv,json} (one row per job of "
+                                     "the manifest, in order), naming the jobs missing or failed; exit 1 unless all "
+                                     "are complete");
   cmd->callback([o] { runBatch(*o); });
 }
 

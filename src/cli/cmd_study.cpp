@@ -151,6 +151,8 @@ struct SweepOptions {
   int threads = 0;
   bool quick = false;
   bool noChart = false;
+  std::vector<int64_t> photons;  ///< levels: photon counts, a second axis (default: the scene's)
+  StudyScheduler scheduler;
   std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_study.py";
 };
 
@@ -173,7 +175,8 @@ nlohmann::json sweepManifest(const SweepOptions& o) {
             {{"method", "voxcone"}, {"spp", o.quick ? 2 : 16}, {"options", vc}}};
   } else if (o.kind == "levels") {
     nlohmann::json options = {{"level", o.quick ? nlohmann::json{3, 4, 5} : nlohmann::json{5, 6, 7, 8, 9}}};
-    if (o.quick) options["photons"] = 4000;
+    if (!o.photons.empty()) options["photons"] = o.photons;  // levels x photons
+    else if (o.quick) options["photons"] = 4000;
     grid = {{{"method", "voxcone"}, {"spp", o.quick ? 1 : 16}, {"options", options}}};
   } else if (o.quick) {
     grid = {{{"method", "path"}, {"spp", {1, 4, 16}}},
@@ -244,7 +247,8 @@ void runSweepStudy(const SweepOptions& given) {
     throw SettingsError("--res " + o.resolution + " differs from the reference's " + size + " (" + o.referencePath +
                         "): the metrics compare images of one size");
   // The renders are a batch (resumable: finished jobs are kept); failed jobs are left out.
-  const nlohmann::json results = runStudyBatch(sweepManifest(o), o.outDir, o.jobsInFlight, o.threads);
+  if (!o.photons.empty() && o.kind != "levels") throw SettingsError("--photons is an axis of the levels study only");
+  const nlohmann::json results = runStudyBatch(sweepManifest(o), o.outDir, o.jobsInFlight, o.threads, o.scheduler);
 
   // One row per successful render; the Pareto front of each method in (time, relMSE).
   nlohmann::json rows = nlohmann::json::array();
@@ -409,6 +413,11 @@ void addStudyCommand(CLI::App& app) {
     cmd->add_flag("--quick", so->quick, "A few cheap settings (for tests)");
     cmd->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)");
     cmd->add_flag("--no-chart", so->noChart, "Write CSV and JSON only");
+    if (std::string(kind) == "levels")
+      cmd->add_option("--photons", so->photons, "Photon counts, a second axis (levels x photons; default: the scene's)")
+          ->check(CLI::Range(int64_t(1), int64_t(1) << 40))
+          ->delimiter(',');
+    addSchedulerOptions(*cmd, so->scheduler);
     cmd->callback([so] { runSweepStudy(*so); });
   }
   addStructureStudies(*study);

@@ -251,6 +251,61 @@ TEST_F(Batch, SkipExistingAndShards) {
   EXPECT_NE(run("batch " + manifest + " --shard 2/2"), 0);
 }
 
+TEST_F(Batch, StatusAndMergeJoinTheShardsAndNameWhatIsMissing) {
+  // What a Slurm array leaves: shard tables and outputs. --merge joins them into one table in
+  // manifest order (rows from the outputs, so a task killed before its table was written loses
+  // nothing) and names what is missing; --status says the same without writing.
+  const std::string manifest = writeManifest(gridManifest());
+  ASSERT_EQ(run("batch " + manifest + " --shard 0/2 -t 1 -q -o " + path("out")), 0);
+  EXPECT_EQ(run("batch " + manifest + " --status -o " + path("out")), 1);  // shard 1 never ran
+  EXPECT_NE(m_out.find("3 complete"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("2 missing"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("no shard has run it"), std::string::npos) << m_out;
+  ASSERT_EQ(run("batch " + manifest + " --shard 1/2 -t 1 -q -o " + path("out")), 0);
+  ASSERT_EQ(run("batch " + manifest + " --status -o " + path("out")), 0) << m_out;
+  EXPECT_FALSE(fs::exists(path("out/results.json")));  // --status writes nothing
+  ASSERT_EQ(run("batch " + manifest + " --merge -o " + path("out")), 0) << m_out;
+  const nlohmann::json merged = readJson(path("out/results.json"));
+  ASSERT_EQ(merged["rows"].size(), 5u);
+  // The same rows, in the same order, as one batch of the whole manifest.
+  ASSERT_EQ(run("batch " + manifest + " -t 1 -q -o " + path("whole")), 0);
+  const nlohmann::json whole = readJson(path("whole/results.json"));
+  for (size_t i = 0; i < 5; ++i) {
+    EXPECT_EQ(merged["rows"][i]["name"], whole["rows"][i]["name"]);
+    EXPECT_EQ(merged["rows"][i]["status"], "ok");
+    EXPECT_EQ(merged["rows"][i]["resolved_spp"], whole["rows"][i]["resolved_spp"]);
+  }
+  // An output lost since (a node's disk, a truncated copy): missing, and exit 1.
+  const std::string lost = merged["rows"][3]["name"];
+  fs::remove(path("out/" + lost + ".exr"));
+  EXPECT_EQ(run("batch " + manifest + " --merge -o " + path("out")), 1);
+  EXPECT_NE(m_out.find(lost + ": missing"), std::string::npos) << m_out;
+  EXPECT_EQ(readJson(path("out/results.json"))["rows"][3]["status"], "missing");
+  // One mode at a time; --wait only with --slurm.
+  EXPECT_EQ(run("batch " + manifest + " --merge --status -o " + path("out")), 2);
+  EXPECT_EQ(run("batch " + manifest + " --wait -o " + path("out")), 2);
+}
+
+TEST_F(Batch, SlurmScriptRunsEachShardWithSkipExisting) {
+  // The script `--slurm` submits (printed by --dry-run, no Slurm needed): one array task per
+  // shard, the shard count written in (a task resubmitted alone keeps its slice), resumable.
+  const std::string manifest = writeManifest(gridManifest());
+  ASSERT_EQ(run("batch " + manifest + " --slurm --shards 2 --partition gpu --time 10:00 --array-limit 1 -t 3 --dry-run -o " +
+                path("out")),
+            0);
+  EXPECT_NE(m_out.find("#SBATCH --array=0-1%1\n"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("#SBATCH --partition=gpu\n"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("#SBATCH --time=10:00\n"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("#SBATCH --cpus-per-task=3\n"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("#SBATCH --requeue\n"), std::string::npos) << m_out;
+  EXPECT_NE(m_out.find("--shard \"${SLURM_ARRAY_TASK_ID}/2\" --skip-existing"), std::string::npos) << m_out;
+  // Without Slurm installed, submitting is a clear error (the script is still written).
+  if (std::system("command -v sbatch >/dev/null 2>&1") != 0) {
+    EXPECT_EQ(run("batch " + manifest + " --slurm -o " + path("out2")), 2);
+    EXPECT_TRUE(fs::exists(path("out2/slurm/manifest.sbatch")));
+  }
+}
+
 TEST_F(Batch, MetricsAgainstTheReferenceMatchCompare) {
   const std::string ref = path("ref.exr");
   ASSERT_EQ(run("render " + test::sourceDir() + "/data/scenes/cornell-box.json --res 12x12 --spp 64 -q -o " + ref), 0);
