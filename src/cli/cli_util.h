@@ -2,6 +2,8 @@
 // Helpers of the subcommands: option checks, and running voxcone itself in child processes
 // (study, batch).
 
+#include "voxcone/batch/process.h"
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json_fwd.hpp>
 
@@ -10,9 +12,6 @@
 #include <string>
 
 namespace voxcone {
-
-/// `s` quoted for /bin/sh.
-std::string shellQuote(const std::string& s);
 
 /// CLI11 check: the value must not be empty (an empty --method or -o would otherwise mean
 /// "not given" and silently fall back to a default).
@@ -24,17 +23,7 @@ const CLI::Validator& positiveNumber();
 /// bits) is a SettingsError naming `option`, never clamped.
 uint64_t parseSeed(const std::string& option, const std::string& text);
 
-/// Run `cmd` through /bin/sh and capture its stdout; returns the exit status (128 + the signal
-/// when a signal ended it, as a shell says). The child gets SIGTERM if the calling thread dies
-/// first (a command starting with "exec" passes that on to its program). Throws Error when it
-/// cannot be started.
-int runCapture(const std::string& cmd, std::string& out);
 
-/// Send `sig` to every child runCapture is waiting for (a batch passing on SIGTERM).
-void signalChildren(int sig);
-
-/// Path of the running voxcone executable.
-std::string selfExe();
 
 /// Where a study's batch runs: here, or as a Slurm job array (`batch --slurm --wait`, then its
 /// --merge), with these submission settings.
