@@ -59,39 +59,19 @@ uint64_t parseSeed(const std::string& option, const std::string& text) {
 
 void addSchedulerOptions(CLI::App& cmd, StudyScheduler& scheduler) {
   cmd.add_flag("--slurm", scheduler.slurm,
-               "Run the renders as a Slurm job array (batch --slurm --wait) and merge what its tasks wrote");
-  cmd.add_option("--partition", scheduler.partition, "--slurm: the partition to submit to");
-  cmd.add_option("--time", scheduler.timeLimit, "--slurm: each task's time limit (e.g. 30:00)");
-  cmd.add_option("--shards", scheduler.shards, "--slurm: array tasks (default: one per render)")
-      ->check(CLI::Range(1, 1000000));
+               "Run the renders as a Slurm job array (as batch --slurm), wait for it and merge what its tasks wrote");
+  cmd.add_option("--partition", scheduler.cluster.partition, "--slurm: the partition to submit to");
+  cmd.add_option("--time", scheduler.cluster.timeLimit, "--slurm: each task's time limit (e.g. 30:00)");
+  cmd.add_option("--shards", scheduler.cluster.shards, "--slurm: array tasks (default: one per render)")
+      ->check(CLI::Range(size_t(1), size_t(1000000)));
 }
 
 nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& outDir, int jobsInFlight,
-                             int threadsPerJob, const StudyScheduler& scheduler) {
-  std::filesystem::create_directories(outDir);
-  const std::string manifestPath = outDir + "/manifest.json";
-  writeJsonAtomic(manifestPath, manifest);
-  std::string out;
-  // The batch's stderr is the study's: its "[i/N] job elapsed eta: status" lines are the
-  // study's progress.
-  std::string cmd = "exec " + shellQuote(selfExe()) + " batch " + shellQuote(manifestPath) + " -o " +
-                    shellQuote(outDir + "/runs") + " -j " + std::to_string(jobsInFlight) + " -t " +
-                    std::to_string(threadsPerJob);
-  if (!scheduler.slurm) {
-    cmd += " --skip-existing";
-  } else {
-    // Each task skips what exists; --wait then merges the shards into runs/results.json.
-    cmd += " --slurm --wait";
-    if (!scheduler.partition.empty()) cmd += " --partition " + shellQuote(scheduler.partition);
-    if (!scheduler.timeLimit.empty()) cmd += " --time " + shellQuote(scheduler.timeLimit);
-    if (scheduler.shards > 0) cmd += " --shards " + std::to_string(scheduler.shards);
-  }
-  const int code = runCapture(cmd, out);
-  if (code == 128 + SIGINT || code == 128 + SIGTERM) throw CancelledError("the study's batch was interrupted; run it again to resume");
-  if (code != 0 && code != 1) throw Error("batch failed (exit status " + std::to_string(code) + "; its message is above)");
-  std::ifstream f(outDir + "/runs/results.json");
-  if (!f) throw Error("batch wrote no " + outDir + "/runs/results.json");
-  return nlohmann::json::parse(f);
+                             int threadsPerJob) {
+  BatchSettings batch;
+  batch.jobsInFlight = jobsInFlight;
+  batch.threadsPerJob = threadsPerJob;
+  return runStudyRenders(manifest, outDir, batch);
 }
 
 void runChartScript(const std::string& script, const std::string& studyJson, const std::string& outStem) {

@@ -3,6 +3,7 @@
 // (study, batch).
 
 #include "voxcone/batch/process.h"
+#include "voxcone/batch/study.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json_fwd.hpp>
@@ -25,21 +26,9 @@ uint64_t parseSeed(const std::string& option, const std::string& text);
 
 
 
-/// Where a study's batch runs: here, or as a Slurm job array (`batch --slurm --wait`, then its
-/// --merge), with these submission settings.
-struct StudyScheduler {
-  bool slurm = false;
-  std::string partition;  ///< --partition, "" for the cluster's default
-  std::string timeLimit;  ///< --time per task, "" for the partition's
-  int shards = 0;         ///< array tasks, 0: one per job
-};
-
-/// A study's renders: write `manifest` to outDir/manifest.json, run it as a resumable batch
-/// (`voxcone batch --skip-existing`, finished renders kept) into outDir/runs, here or on Slurm,
-/// and return its results.json (the batch's, or the shards' merged: the same rows). Failed jobs
-/// are in the rows; throws Error when the batch itself fails.
+/// A study's renders with `jobsInFlight` and `threadsPerJob`, here (runStudyRenders).
 nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& outDir, int jobsInFlight,
-                             int threadsPerJob, const StudyScheduler& scheduler = {});
+                             int threadsPerJob);
 
 /// Add --slurm, --partition, --time and --shards to a study command.
 void addSchedulerOptions(CLI::App& cmd, StudyScheduler& scheduler);
