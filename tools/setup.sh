@@ -42,7 +42,9 @@ case "$cmd" in
     ./build/voxcone render "$@"
     ;;
   test)
-    install_deps python3-matplotlib
+    # Embree: `--accel embree` and its tests; slurm-wlm and munge: the Slurm self-test
+    # (ctest SlurmSelftest starts its own one-node cluster).
+    install_deps python3-matplotlib libembree-dev slurm-wlm munge
     build ON
     ctest --test-dir build --output-on-failure -j "$(nproc)"
     ;;

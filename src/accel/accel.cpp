@@ -2,6 +2,7 @@
 
 #include "voxcone/accel/accel.h"
 
+#include "voxcone/accel/embree_accel.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/accel/kdtree.h"
 #include "voxcone/core/error.h"
@@ -9,8 +10,20 @@
 
 namespace voxcone {
 
+#ifndef VOXCONE_HAVE_EMBREE
+bool embreeAvailable() { return false; }
+
+std::unique_ptr<Accel> buildEmbreeAccel(const std::vector<Vec3>&, const std::vector<UVec3>&, Progress*) {
+  throw SettingsError("this voxcone was built without Embree (install libembree-dev and rebuild)");
+}
+#endif
+
 const std::vector<std::string>& accelKinds() {
-  static const std::vector<std::string> kinds = {"hbvh", "bvh", "kdtree"};
+  static const std::vector<std::string> kinds = [] {
+    std::vector<std::string> k = {"hbvh", "bvh", "kdtree"};
+    if (embreeAvailable()) k.push_back("embree");
+    return k;
+  }();
   return kinds;
 }
 
@@ -23,6 +36,7 @@ std::unique_ptr<Accel> buildAccel(const std::string& kind, const std::vector<Vec
     return std::make_unique<Hbvh>(positions, triangles, s, progress);
   }
   if (kind == "kdtree") return std::make_unique<KdTree>(positions, triangles, KdTreeBuildSettings{}, progress);
+  if (kind == "embree" && embreeAvailable()) return buildEmbreeAccel(positions, triangles, progress);
   std::string names;
   for (const std::string& k : accelKinds()) names += (names.empty() ? "" : ", ") + k;
   throw SettingsError("unknown acceleration structure '" + kind + "' (one of " + names + ")");

@@ -286,7 +286,7 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024));
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");
-  cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres) or kdtree")
+  cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres), kdtree, or embree where built with it")
       ->check(CLI::IsMember(accelKinds()));
   cmd->add_option("--target-error", o->targetError,
                   "voxcone: render averaged passes (of --spp, default 4) until the predicted relMSE against the true "

@@ -26,8 +26,9 @@ fail() { say "FAILED: $*"; exit 1; }
 if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
   if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
     say "installing slurm-wlm and munge"
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge >/tmp/slurm-selftest-apt.log 2>&1 ||
-      skip "apt-get install slurm-wlm munge failed (see /tmp/slurm-selftest-apt.log)"
+    { DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge ||
+      { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -q slurm-wlm munge; }; } \
+      >/tmp/slurm-selftest-apt.log 2>&1 || skip "apt-get install slurm-wlm munge failed (see /tmp/slurm-selftest-apt.log)"
   else
     skip "slurm-wlm and munge are not installed and cannot be installed here (not root, or no apt-get)"
   fi
