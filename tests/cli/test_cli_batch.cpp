@@ -53,6 +53,18 @@ protected:
     if (!reference.empty()) m["reference"] = reference;
     return m;
   }
+  /// Start `voxcone batch MANIFEST -o runs -j 1 -t 1` (stderr to batch-stderr.txt); its pid.
+  pid_t startBatch(const std::string& manifest) {
+    const std::string out = path("runs"), err = path("batch-stderr.txt");
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      std::freopen(err.c_str(), "w", stderr);
+      ::execl(VOXCONE_CLI_PATH, VOXCONE_CLI_PATH, "batch", manifest.c_str(), "-o", out.c_str(), "-j", "1", "-t", "1",
+              static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+    return pid;
+  }
   std::string m_out;
 };
 
@@ -69,6 +81,18 @@ std::vector<pid_t> processesWith(const std::string& needle) {
   return out;
 }
 
+/// Pids of the renders whose command line holds `tag` (not `batch` itself), once one has
+/// started; empty after 60 s without one.
+std::vector<pid_t> waitForRenders(const std::string& tag, pid_t batch) {
+  std::vector<pid_t> renders;
+  for (int i = 0; i < 600 && renders.empty(); ++i) {
+    ::usleep(100000);
+    for (pid_t p : processesWith(tag))
+      if (p != batch) renders.push_back(p);
+  }
+  return renders;
+}
+
 TEST_F(Batch, ARenderDiesWithItsBatch) {
   // A batch killed with SIGKILL (no chance to clean up) used to leave its render running and
   // writing into the output folder; the render now gets SIGTERM with its parent's death.
@@ -76,21 +100,10 @@ TEST_F(Batch, ARenderDiesWithItsBatch) {
   const std::string manifest = writeManifest(
       {{"defaults", {{"scene", test::sourceDir() + "/data/scenes/cornell-box.json"}, {"res", "64x64"}}},
        {"jobs", {{{"name", tag}, {"method", "path"}, {"spp", 1 << 20}}}}});
-  const pid_t batch = ::fork();
+  const pid_t batch = startBatch(manifest);
   ASSERT_GE(batch, 0);
-  if (batch == 0) {
-    const std::string out = path("runs");
-    ::execl(VOXCONE_CLI_PATH, VOXCONE_CLI_PATH, "batch", manifest.c_str(), "-q", "-o", out.c_str(), "-j", "1", "-t", "1",
-            static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
   // Wait (up to 60 s on a slow machine) for the render to start, then kill the batch.
-  std::vector<pid_t> renders;
-  for (int i = 0; i < 600 && renders.empty(); ++i) {
-    ::usleep(100000);
-    for (pid_t p : processesWith(tag))
-      if (p != batch) renders.push_back(p);
-  }
+  const std::vector<pid_t> renders = waitForRenders(tag, batch);
   ASSERT_FALSE(renders.empty()) << "the render never started";
   ::kill(batch, SIGKILL);
   ::waitpid(batch, nullptr, 0);
@@ -111,21 +124,9 @@ TEST_F(Batch, SigtermStopsTheRendersAndRecordsThemInterrupted) {
   const std::string manifest = writeManifest(
       {{"defaults", {{"scene", test::sourceDir() + "/data/scenes/cornell-box.json"}, {"res", "16x16"}, {"method", "path"}}},
        {"jobs", {{{"name", tag}, {"spp", 1 << 20}}, {{"name", "after"}, {"spp", 1}}}}});
-  const pid_t batch = ::fork();
+  const pid_t batch = startBatch(manifest);
   ASSERT_GE(batch, 0);
-  if (batch == 0) {
-    const std::string out = path("runs");
-    std::freopen(path("batch-stderr.txt").c_str(), "w", stderr);
-    ::execl(VOXCONE_CLI_PATH, VOXCONE_CLI_PATH, "batch", manifest.c_str(), "-o", out.c_str(), "-j", "1", "-t", "1",
-            static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  std::vector<pid_t> renders;
-  for (int i = 0; i < 600 && renders.empty(); ++i) {
-    ::usleep(100000);
-    for (pid_t p : processesWith(tag))
-      if (p != batch) renders.push_back(p);
-  }
+  const std::vector<pid_t> renders = waitForRenders(tag, batch);
   ASSERT_FALSE(renders.empty()) << "the render never started";
   ::usleep(300000);
   ::kill(batch, SIGTERM);
