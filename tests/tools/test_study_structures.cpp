@@ -2,6 +2,7 @@
 // whose ratios are the quotients of their own times, the same image from every structure, and
 // charts that plot the studies' numbers.
 
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/scene/generate.h"
 
@@ -83,7 +84,8 @@ TEST_F(StudyStructures, QuickStructuresStudyComparesEveryStructureOnTheSameImage
   ASSERT_EQ(std::system(cmd.c_str()), 0) << std::ifstream(path("out.txt")).rdbuf();
   const nlohmann::json study = readJson(path("s/structures.json"));
   const nlohmann::json& rows = study["rows"];
-  ASSERT_EQ(rows.size(), 6u);  // two generated meshes x hbvh, bvh, kdtree
+  const std::vector<std::string>& kinds = accelKinds();  // hbvh, bvh, kdtree (and embree where built)
+  ASSERT_EQ(rows.size(), 2 * kinds.size());              // two generated meshes x every structure
   std::map<std::string, nlohmann::json> hbvh;
   for (const nlohmann::json& r : rows)
     if (r["accel"] == "hbvh") hbvh[r["mesh"]] = r;
@@ -99,14 +101,17 @@ TEST_F(StudyStructures, QuickStructuresStudyComparesEveryStructureOnTheSameImage
     EXPECT_NEAR(r["memory_vs_hbvh"].get<double>(), r["accel_mb"].get<double>() / h["accel_mb"].get<double>(), 1e-9);
     EXPECT_EQ(r["accel_stats"]["kind"], r["accel"]);
     // The same image: every structure finds the same closest hits; a pixel may differ where a
-    // sample passes exactly through an edge shared by two triangles.
-    EXPECT_LE(r["pixels_differing_from_hbvh"].get<int>(), 24 * 24 / 100) << r["mesh"] << " " << r["accel"];
+    // sample passes exactly through an edge shared by two triangles. Embree's own triangle test
+    // rounds hit points differently, so nearly every pixel differs in its last bits.
+    if (r["accel"] != "embree") {
+      EXPECT_LE(r["pixels_differing_from_hbvh"].get<int>(), 24 * 24 / 100) << r["mesh"] << " " << r["accel"];
+    }
     EXPECT_LT(r["relmse_vs_hbvh"].get<double>(), 1e-3);
     if (r["accel"] == "kdtree") {
       EXPECT_GE(r["accel_stats"]["references"].get<double>(), r["triangles"].get<double>() - 12);
     }
   }
-  EXPECT_EQ(accels, (std::set<std::string>{"hbvh", "bvh", "kdtree"}));
+  EXPECT_EQ(accels, (std::set<std::string>(kinds.begin(), kinds.end())));
   EXPECT_EQ(lineCount(path("s/structures.csv")), rows.size() + 1);
   EXPECT_GT(std::filesystem::file_size(path("s/structures.png")), 10000u);
   const nlohmann::json plotted = readJson(path("s/structures.plotted.json"));
