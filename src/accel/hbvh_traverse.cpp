@@ -20,6 +20,8 @@ bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, const
   return intersectTriangleWatertight(ray.origin, wr, p0, p1, p2, tMin, tMax, tOut, b1Out, b2Out);
 }
 
+WatertightRay makeWatertightRay(const Vec3& dir) { return WatertightRay(dir); }
+
 namespace {
 
 bool cpuRunsAvx2() {

@@ -21,6 +21,10 @@ namespace voxcone {
 /// baseline instruction set): the packet test's rare exact-zero edge lanes.
 bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, const WatertightRay& wr, float tMin,
                            float tMax, float& tOut, float& b1Out, float& b2Out);
+/// WatertightRay(dir), made out of line in the baseline TU (hbvh_traverse.cpp): built without
+/// full inlining (a sanitizer build), the AVX2 kernels would otherwise emit their own copy of
+/// the inline constructor, which the linker may keep for every caller.
+WatertightRay makeWatertightRay(const Vec3& dir);
 
 namespace VOXCONE_ISA {
 
@@ -86,7 +90,7 @@ inline F8 operator>=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)};
 struct RayTri4 {
   WatertightRay wr;
   float org[3];
-  explicit RayTri4(const Ray& r) : wr(r.dir), org{r.origin.x, r.origin.y, r.origin.z} {}
+  explicit RayTri4(const Ray& r) : wr(makeWatertightRay(r.dir)), org{r.origin.x, r.origin.y, r.origin.z} {}
 };
 
 /// The watertight test (triangle.h) on F::kLanes triangles at once (lane i: packets[i / 4],

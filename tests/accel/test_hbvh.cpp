@@ -392,7 +392,9 @@ TEST(Hbvh, AvxKernelsShareNoInlineCodeWithTheBaseline) {
   int defined = 0;
   std::istringstream lines(out);
   for (std::string line; std::getline(lines, line);) {
-    if (line.empty()) continue;
+    // Type descriptions (UBSan's function-type checks emit them) are data, the same whatever
+    // the instruction set.
+    if (line.empty() || line.find(" typeinfo") != std::string::npos) continue;
     ++defined;
     EXPECT_NE(line.find(" voxcone::avx2::"), std::string::npos) << line;
   }
