@@ -17,6 +17,8 @@
 
 #include <CLI/CLI.hpp>
 #include <benchmark/benchmark.h>
+#include "voxcone/accel/embree_ray.h"
+
 #include <embree3/rtcore.h>
 #include <nlohmann/json.hpp>
 #include <tbb/blocked_range.h>
@@ -119,20 +121,6 @@ private:
   RTCScene m_scene = nullptr;
 };
 
-inline void toEmbree(const Ray& r, float tMax, RTCRay& out) {
-  out.org_x = r.origin.x;
-  out.org_y = r.origin.y;
-  out.org_z = r.origin.z;
-  out.tnear = r.tMin;
-  out.dir_x = r.dir.x;
-  out.dir_y = r.dir.y;
-  out.dir_z = r.dir.z;
-  out.time = 0.0f;
-  out.tfar = tMax;
-  out.mask = 0xffffffffu;
-  out.id = 0;
-  out.flags = 0;
-}
 
 // ---------------------------------------------------------------------------------------------
 // Accelerators behind one interface: trace a block of rays, write one float per ray

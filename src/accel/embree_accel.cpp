@@ -3,11 +3,11 @@
 
 #include "voxcone/accel/embree_accel.h"
 
+#include "voxcone/accel/embree_ray.h"
 #include "voxcone/accel/triangle.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/timer.h"
 
-#include <embree3/rtcore.h>
 #include <nlohmann/json.hpp>
 
 #include <atomic>
@@ -109,21 +109,6 @@ public:
   }
 
 private:
-  static void toEmbree(const Ray& r, float tMax, RTCRay& out) {
-    out.org_x = r.origin.x;
-    out.org_y = r.origin.y;
-    out.org_z = r.origin.z;
-    out.tnear = r.tMin;
-    out.dir_x = r.dir.x;
-    out.dir_y = r.dir.y;
-    out.dir_z = r.dir.z;
-    out.time = 0.0f;
-    out.tfar = tMax;
-    out.mask = 0xffffffffu;
-    out.id = 0;
-    out.flags = 0;
-  }
-
   RTCDevice m_device = nullptr;
   RTCScene m_scene = nullptr;
   std::string m_error;

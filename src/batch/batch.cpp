@@ -232,13 +232,16 @@ bool completeOutputs(const fs::path& outDir, const std::string& name) {
 
 namespace {
 
+/// The voxcone a batch runs: the one it names, else this executable.
+std::string executableOf(const BatchSettings& o) { return o.executable.empty() ? selfExe() : o.executable; }
+
 /// Run `job` as a child `voxcone render` writing outDir/<name>.{exr,png,json}.
 JobResult runJob(const Job& job, const fs::path& outDir, const BatchSettings& o) {
   const nlohmann::json& s = job.spec;
   std::string cmd;
   if (o.memoryBudgetMb > 0.0)  // the data segment and private writable mappings: the heap
     cmd += "ulimit -d " + std::to_string(static_cast<long long>(o.memoryBudgetMb * 1024.0)) + " && ";
-  cmd += "exec " + shellQuote(o.executable.empty() ? selfExe() : o.executable) + " render " + shellQuote(s["scene"].get<std::string>()) + " -q -o " +
+  cmd += "exec " + shellQuote(executableOf(o)) + " render " + shellQuote(s["scene"].get<std::string>()) + " -q -o " +
          shellQuote((outDir / job.name).string()) + " -t " +
          std::to_string(s.contains("threads") ? s["threads"].get<int64_t>() : int64_t(o.threadsPerJob)) + " --options " +
          shellQuote(s["options"].dump());
@@ -552,7 +555,7 @@ std::string slurmScript(const SlurmSettings& slurm, const BatchSettings& batch, 
   if (!slurm.timeLimit.empty()) s << "#SBATCH --time=" << slurm.timeLimit << "\n";
   s << "# Written by 'voxcone batch --slurm'; it may also be submitted by hand: sbatch THIS_FILE\n";
   s << "# (one task: sbatch --array=I THIS_FILE). Join the shards' results: voxcone batch MANIFEST -o OUT --merge\n";
-  s << "exec " << shellQuote(batch.executable.empty() ? selfExe() : batch.executable) << " batch "
+  s << "exec " << shellQuote(executableOf(batch)) << " batch "
     << shellQuote(manifestPath) << " -o " << shellQuote(outDir.string()) << " --shard \"${SLURM_ARRAY_TASK_ID}/"
     << shards << "\" --skip-existing -q -j " << batch.jobsInFlight << " -t " << batch.threadsPerJob;
   if (batch.memoryBudgetMb > 0.0) s << " --memory-budget-mb " << batch.memoryBudgetMb;

@@ -7,23 +7,13 @@
 
 #include <nlohmann/json.hpp>
 
-#include <fcntl.h>
-#include <sys/prctl.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
-#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
-#include <cerrno>
-#include <csignal>
-#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <mutex>
-#include <set>
 
 namespace voxcone {
 
