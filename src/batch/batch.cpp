@@ -235,14 +235,15 @@ namespace {
 /// The voxcone a batch runs: the one it names, else this executable.
 std::string executableOf(const BatchSettings& o) { return o.executable.empty() ? selfExe() : o.executable; }
 
-/// Run `job` as a child `voxcone render` writing outDir/<name>.{exr,png,json}.
+/// Run `job` as a child `voxcone render` writing outDir/<name>.{exr,png,json} (given as
+/// -o <name>.exr: a name may hold dots, which render would take for an unknown extension).
 JobResult runJob(const Job& job, const fs::path& outDir, const BatchSettings& o) {
   const nlohmann::json& s = job.spec;
   std::string cmd;
   if (o.memoryBudgetMb > 0.0)  // the data segment and private writable mappings: the heap
     cmd += "ulimit -d " + std::to_string(static_cast<long long>(o.memoryBudgetMb * 1024.0)) + " && ";
   cmd += "exec " + shellQuote(executableOf(o)) + " render " + shellQuote(s["scene"].get<std::string>()) + " -q -o " +
-         shellQuote((outDir / job.name).string()) + " -t " +
+         shellQuote((outDir / job.name).string() + ".exr") + " -t " +
          std::to_string(s.contains("threads") ? s["threads"].get<int64_t>() : int64_t(o.threadsPerJob)) + " --options " +
          shellQuote(s["options"].dump());
   if (s.contains("method")) cmd += " --method " + shellQuote(s["method"].get<std::string>());

@@ -2,6 +2,7 @@
 
 #include "cli_util.h"
 
+#include "voxcone/batch/process.h"
 #include "voxcone/core/error.h"
 #include "voxcone/image/image_io.h"
 
@@ -52,8 +53,9 @@ void addSchedulerOptions(CLI::App& cmd, StudyScheduler& scheduler) {
                "Run the renders as a Slurm job array (as batch --slurm), wait for it and merge what its tasks wrote");
   cmd.add_option("--partition", scheduler.cluster.partition, "--slurm: the partition to submit to");
   cmd.add_option("--time", scheduler.cluster.timeLimit, "--slurm: each task's time limit (e.g. 30:00)");
-  cmd.add_option("--shards", scheduler.cluster.shards, "--slurm: array tasks (default: one per render)")
-      ->check(CLI::Range(size_t(1), size_t(1000000)));
+  cmd.add_option("--shards", scheduler.cluster.shards, "--slurm: array tasks")
+      ->check(CLI::Range(size_t(1), size_t(1000000)))
+      ->default_str("one per render");
 }
 
 nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& outDir, int jobsInFlight,
@@ -63,6 +65,30 @@ nlohmann::json runStudyBatch(const nlohmann::json& manifest, const std::string& 
   batch.threadsPerJob = threadsPerJob;
   return runStudyRenders(manifest, outDir, batch);
 }
+
+namespace {
+std::vector<std::string> g_commandLine;
+}  // namespace
+
+void setCommandLine(int argc, char** argv) { g_commandLine.assign(argv, argv + argc); }
+const std::vector<std::string>& commandLine() { return g_commandLine; }
+
+std::string dataRoot() {
+  namespace fs = std::filesystem;
+  if (const char* env = std::getenv("VOXCONE_DATA_DIR"); env && *env) {
+    if (!fs::is_directory(env)) throw SettingsError(std::string("VOXCONE_DATA_DIR is not a folder: ") + env);
+    return env;
+  }
+  const fs::path bin = fs::path(selfExe()).parent_path();
+  for (const fs::path& root : {bin / ".." / "share" / "voxcone", bin / ".."}) {
+    std::error_code ec;
+    if (fs::is_regular_file(root / "tools" / "plot_study.py", ec)) return fs::weakly_canonical(root, ec).string();
+  }
+  throw SettingsError("cannot find voxcone's tools and data beside " + bin.string() +
+                      " (neither ../share/voxcone nor the source tree); set VOXCONE_DATA_DIR");
+}
+
+std::string dataPath(const std::string& relative) { return dataRoot() + "/" + relative; }
 
 void runChartScript(const std::string& script, const std::string& studyJson, const std::string& outStem) {
   std::string out;

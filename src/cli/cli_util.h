@@ -11,6 +11,7 @@
 #include <cstdint>
 
 #include <string>
+#include <vector>
 
 namespace voxcone {
 
@@ -36,5 +37,18 @@ void addSchedulerOptions(CLI::App& cmd, StudyScheduler& scheduler);
 /// Run a chart script (python3-matplotlib) on STUDY.json writing OUT_STEM.{png,svg}; prints
 /// what it says. Throws Error with its first line when it fails.
 void runChartScript(const std::string& script, const std::string& studyJson, const std::string& outStem);
+
+/// The process's command line as main received it (sidecars record it); setCommandLine is
+/// called once, from main.
+void setCommandLine(int argc, char** argv);
+const std::vector<std::string>& commandLine();
+
+/// The folder holding voxcone's tools/ and data/ (chart scripts, scenes, fetched models), found
+/// relative to the running executable so that a build tree and an installed copy both work:
+/// $VOXCONE_DATA_DIR if set, else <bin>/../share/voxcone (cmake --install), else <bin>/.. when
+/// it holds tools/plot_study.py (a build folder inside the source tree). Throws SettingsError.
+std::string dataRoot();
+/// dataRoot() + "/" + relative.
+std::string dataPath(const std::string& relative);
 
 }  // namespace voxcone

@@ -93,24 +93,28 @@ void addBatchCommand(CLI::App& app) {
   auto o = std::make_shared<BatchOptions>();
   CLI::App* cmd = app.add_subcommand("batch", "Run the renders of a manifest (jobs and grids of settings) in parallel");
   cmd->add_option("manifest", o->manifestPath, "Manifest (JSON)")->required();
-  cmd->add_option("-o,--output", o->outDir, "Output folder (default: the manifest's output_dir, else <manifest>/ beside it)");
-  cmd->add_option("-j,--jobs", o->batch.jobsInFlight, "Jobs in flight (default 1); mind memory: each holds its scene and field")
+  cmd->add_option("-o,--output", o->outDir, "Output folder")
+      ->default_str("the manifest's output_dir, else <manifest>/");
+  cmd->add_option("-j,--jobs", o->batch.jobsInFlight, "Jobs in flight; mind memory: each holds its scene and field")
       ->check(CLI::Range(1, 1024));
   cmd->add_option("-t,--threads", o->batch.threadsPerJob, "Threads per job (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_flag("--skip-existing", o->batch.skipExisting, "Keep jobs whose outputs exist (resume an interrupted batch)");
   cmd->add_option("--shard", o->shard, "Run the jobs whose index % N == I (I/N), for spreading over machines");
   cmd->add_option("--memory-budget-mb", o->batch.memoryBudgetMb, "Heap limit per job; a job over it fails and the batch goes on")
-      ->check(positiveNumber());
+      ->check(positiveNumber())
+      ->default_str("none");
   cmd->add_flag("--dry-run", o->dryRun, "Print the expanded jobs (name and settings) and exit");
   cmd->add_flag("-q,--quiet", o->batch.quiet, "No per-job lines");
   cmd->add_flag("--slurm", o->slurm,
                 "Submit the manifest to Slurm as a job array (one task per shard, each 'batch --shard I/N "
                 "--skip-existing'); the sbatch script is written to OUT/slurm/ and the job id printed");
-  cmd->add_option("--shards", o->cluster.shards, "--slurm: array tasks (default: one per job)")->check(CLI::Range(1, 1000000));
+  cmd->add_option("--shards", o->cluster.shards, "--slurm: array tasks")->check(CLI::Range(1, 1000000))
+      ->default_str("one per job");
   cmd->add_option("--partition", o->cluster.partition, "--slurm: the partition to submit to");
   cmd->add_option("--time", o->cluster.timeLimit, "--slurm: each task's time limit (Slurm's format, e.g. 30:00)");
   cmd->add_option("--array-limit", o->cluster.arrayLimit, "--slurm: at most this many tasks running at once")
-      ->check(CLI::Range(1, 1000000));
+      ->check(CLI::Range(1, 1000000))
+      ->default_str("no limit");
   cmd->add_flag("--wait", o->wait, "--slurm: wait for the array to finish, then --merge");
   cmd->add_flag("--status", o->status, "Which jobs are complete, failed, interrupted or missing (from the outputs "
                                        "and the shards' tables); exit 1 unless all are complete");

@@ -141,23 +141,27 @@ void addCompareCommand(CLI::App& app) {
   sub->add_option("REF", args->refPath, "Reference image of the same size")->required()->type_name("");
   args->thresholdRelMseOpt =
       sub->add_option("--threshold-relmse", args->thresholdRelMse, "Fail (exit 1) when relMSE is above X")
-          ->type_name("X");
+          ->type_name("X")
+      ->default_str("off");
   args->thresholdPsnrOpt =
       sub->add_option("--threshold-psnr", args->thresholdPsnrDb, "Fail (exit 1) when PSNR (8-bit sRGB) is below DB")
-          ->type_name("DB");
+          ->type_name("DB")
+      ->default_str("off");
   sub->add_option("--error-image", args->errorImagePath,
                   "Write a false-colour map of the relative squared error (.png or .exr)")
       ->type_name("PATH");
   sub->add_option("--error-scale", args->errorScale,
-                  "Relative squared error at the top of the error image's ramp (default: its 99th percentile); "
+                  "Relative squared error at the top of the error image's ramp; "
                   "give two images the same scale to compare them")
       ->check(positiveNumber())
-      ->type_name("X");
+      ->type_name("X")
+      ->default_str("the error's 99th percentile");
   sub->add_option("--regions", args->regions,
                   "Also print an N x N grid of cells: each cell's luminance ratio test/reference and its share of "
                   "the sRGB8 squared error")
       ->check(CLI::Range(1, 64))
-      ->type_name("N");
+      ->type_name("N")
+      ->default_str("off");
   sub->add_flag("--json", args->json, "Print the metrics as one JSON object instead of the table");
   sub->callback([args]() { runCompare(*args); });
 }

@@ -3,8 +3,11 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "default_scene.h"
+#include "version.h"
 #include "voxcone/accel/accel.h"
+#include "voxcone/batch/process.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/hash.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/image/image_io.h"
@@ -83,6 +86,18 @@ void runRender(const RenderOptions& o) {
   const Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
                                           : loadScene(o.scenePath);
   const double loadSec = t.seconds();
+  // What the image was made from, hashed as it was read (xxhsum -H2 checks a file against it).
+  nlohmann::json inputs = nlohmann::json::array();
+  for (size_t i = 0; i < scene.inputFiles.size(); ++i) {
+    const std::string& f = scene.inputFiles[i];
+    uint64_t bytes = 0;
+    const std::string hash = fileXxh128(f, &bytes);
+    const std::string ext = std::filesystem::path(f).extension().string();
+    inputs.push_back({{"role", i == 0 ? "scene" : ext == ".ply" || ext == ".obj" ? "mesh" : "include"},
+                      {"path", std::filesystem::absolute(f).lexically_normal().string()},
+                      {"bytes", bytes},
+                      {"xxh128", hash}});
+  }
 
   RenderSettings settings = scene.render;
   const bool autoSettings = o.targetError > 0.0 || o.timeBudget > 0.0;
@@ -130,6 +145,9 @@ void runRender(const RenderOptions& o) {
                                   : std::filesystem::path(o.output);
   const std::string ext = out.extension().string();
   if (ext == ".exr" || ext == ".png" || ext == ".json") out.replace_extension();
+  else if (!o.output.empty() && !ext.empty())
+    throw SettingsError("-o " + o.output + ": unknown extension '" + ext +
+                        "'; voxcone writes STEM.exr, STEM.png and STEM.json: give STEM or STEM.exr");
   if (o.output.empty()) std::filesystem::create_directories(out.parent_path());
   else if (!out.parent_path().empty() && !std::filesystem::is_directory(out.parent_path()))
     throw SettingsError("output folder does not exist: " + out.parent_path().string());
@@ -186,8 +204,13 @@ void runRender(const RenderOptions& o) {
   if (result.partial) settings.spp = result.completedSpp;
 
   nlohmann::json meta;
-  meta["voxcone_version"] = "0.1.0";
-  meta["scene"] = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName : o.scenePath;
+  meta["voxcone_version"] = kVersion;
+  meta["scene"] = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName
+                                      : std::filesystem::absolute(o.scenePath).lexically_normal().string();
+  meta["command_line"] = commandLine();
+  meta["executable"] = selfExe();
+  meta["working_directory"] = std::filesystem::current_path().string();
+  meta["inputs"] = inputs;
   meta["method"] = settings.method;
   meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
                       {"max_depth", settings.maxDepth}, {"seed", settings.seed},
@@ -228,7 +251,7 @@ void runRender(const RenderOptions& o) {
   });
   writes.run_and_wait([&] {
     try {
-      writePng(pngPath, result.image, &files);
+      writePng(pngPath, result.image, &files, meta);
     } catch (...) {
       pngError = std::current_exception();
     }
@@ -269,45 +292,50 @@ void runRender(const RenderOptions& o) {
 void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON); default: the built-in cornell-box");
-  cmd->add_option("-o,--output", o->output, "Output path; .exr/.png/.json are written beside it (default out/<scene>)")
-      ->check(nonEmpty());
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML)")->default_str("the built-in cornell-box");
+  cmd->add_option("-o,--output", o->output, "Output stem (or STEM.exr/.png/.json): STEM.exr, STEM.png and STEM.json are written; any other extension is an error")
+      ->check(nonEmpty())
+      ->default_str("out/<scene>");
   cmd->add_option("--method", o->method, "Integrator: " + [] {
     std::string s;
     for (const auto& n : integratorNames()) s += (s.empty() ? "" : "|") + n;
     return s;
-  }())->check(nonEmpty());
-  cmd->add_option("--spp", o->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 24));
-  cmd->add_option("--res", o->resolution, "Resolution WIDTHxHEIGHT");
+  }())->check(nonEmpty())->default_str("the scene's");
+  cmd->add_option("--spp", o->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 24))->default_str("the scene's");
+  cmd->add_option("--res", o->resolution, "Resolution WIDTHxHEIGHT")->default_str("the scene's");
   cmd->add_option_function<std::string>(
-      "--seed", [o](const std::string& s) { o->seed = parseSeed("--seed", s); }, "Random seed, [0, 2^64 - 1]");
-  cmd->add_option("--sampler", o->sampler, "Pixel sampler: sobol (default; Owen-scrambled) or independent")
-      ->check(CLI::IsMember(samplerNames()));
+      "--seed", [o](const std::string& s) { o->seed = parseSeed("--seed", s); }, "Random seed, [0, 2^64 - 1]")->default_str("the scene's");
+  cmd->add_option("--sampler", o->sampler, "Pixel sampler: sobol (Owen-scrambled) or independent")
+      ->check(CLI::IsMember(samplerNames()))
+      ->default_str("the scene's, else sobol");
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
-  cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024));
+  cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024))->default_str("the scene's");
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");
-  cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh (default), bvh (no spheres), kdtree, or embree where built with it")
+  cmd->add_option("--accel", o->accel, "Ray acceleration structure: hbvh, bvh (no spheres), kdtree, or embree where built with it")
       ->check(CLI::IsMember(accelKinds()));
   cmd->add_option("--target-error", o->targetError,
                   "voxcone: render averaged passes (of --spp, default 4) until the predicted relMSE against the true "
                   "image, from the passes' spread and path-traced control pixels, is at most this")
-      ->check(positiveNumber());
+      ->check(positiveNumber())
+      ->default_str("off");
   cmd->add_option("--time-budget", o->timeBudget,
                   "voxcone: render averaged passes (of --spp, default 4) for this many seconds (load included)")
-      ->check(positiveNumber());
+      ->check(positiveNumber())
+      ->default_str("off");
   cmd->add_option("--field", o->field,
                   "voxcone: render with this field (.vdb from 'voxcone voxelize -o') instead of tracing photons and "
                   "voxelizing; its levels and photons are the field's")
       ->check(nonEmpty());
   cmd->add_option("--memory-budget-mb", o->memoryBudgetMb,
                   "voxcone: refuse a voxel level whose estimated memory exceeds this many MB, before allocating (0: no "
-                  "budget; default: the machine's available memory)")
-      ->check(CLI::Range(0.0, 1e12));
+                  "budget)")
+      ->check(CLI::Range(0.0, 1e12))
+      ->default_str("the machine's available memory");
   cmd->add_flag("--write-partial", o->writePartial,
                 "On SIGINT/SIGTERM write the samples taken so far (whole passes of every pixel) as a complete "
                 "image marked partial, with its spp; the exit status still says interrupted (128 + the signal). "
                 "Not for voxcone, whose samples are one pass")
-      ->default_val(false);
+      ->default_str("");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

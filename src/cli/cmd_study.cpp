@@ -34,7 +34,7 @@ struct StudyOptions {
   double memoryBudgetMb = -1;  // -1: voxelize's default (the available memory)
   int threads = 0;
   bool noChart = false;
-  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_memory.py";
+  std::string plotScript;  // empty: dataPath("tools/plot_memory.py")
 };
 
 void runStudyMemory(const StudyOptions& o) {
@@ -137,7 +137,7 @@ void runStudyMemory(const StudyOptions& o) {
                 r["prepare_seconds"].get<double>(), r["peak_rss_bytes"].get<double>() / 1e6);
   }
   std::printf("wrote %s, %s\n", csvPath.c_str(), jsonPath.c_str());
-  if (!o.noChart) runChartScript(o.plotScript, jsonPath, o.outDir + "/memory");
+  if (!o.noChart) runChartScript(o.plotScript.empty() ? dataPath("tools/plot_memory.py") : o.plotScript, jsonPath, o.outDir + "/memory");
 }
 
 /// A study that is a batch of renders against a reference: speed-accuracy, photons or levels.
@@ -153,7 +153,7 @@ struct SweepOptions {
   bool noChart = false;
   std::vector<int64_t> photons;  ///< levels: photon counts, a second axis (default: the scene's)
   StudyScheduler scheduler;
-  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_study.py";
+  std::string plotScript;  // empty: dataPath("tools/plot_study.py")
 };
 
 void runSweepStudy(const SweepOptions& given) {
@@ -230,7 +230,7 @@ void runSweepStudy(const SweepOptions& given) {
     }
   }
   std::printf("wrote %s.csv, %s.json\n", stem.c_str(), stem.c_str());
-  if (!o.noChart) runChartScript(o.plotScript, stem + ".json", stem);
+  if (!o.noChart) runChartScript(o.plotScript.empty() ? dataPath("tools/plot_study.py") : o.plotScript, stem + ".json", stem);
 }
 
 }  // namespace
@@ -241,15 +241,18 @@ void addStudyCommand(CLI::App& app) {
   auto o = std::make_shared<StudyOptions>();
   CLI::App* mem = study->add_subcommand("memory", "Voxel memory and time against level (CSV, JSON, PNG and SVG chart)");
   mem->add_option("scene", o->scenePath, "Scene file (JSON)")->required();
-  mem->add_option("--levels", o->levels, "Levels FIRST..LAST (default 6..12)");
-  mem->add_option("-o,--output", o->outDir, "Output folder (default out/study-memory)");
-  mem->add_option("--photons", o->photons, "Photons per level (default: the scene's, as voxelize and render use)");
+  mem->add_option("--levels", o->levels, "Levels FIRST..LAST");
+  mem->add_option("-o,--output", o->outDir, "Output folder");
+  mem->add_option("--photons", o->photons, "Photons per level (as voxelize and render use)")
+      ->default_str("the scene's");
   mem->add_option("--memory-budget-mb", o->memoryBudgetMb,
                   "Budget per level, MB (0: none; default: voxelize's, the available memory): a level over it is "
                   "refused and recorded")
-      ->check(CLI::Range(0.0, 1e12));
+      ->check(CLI::Range(0.0, 1e12))
+      ->default_str("the machine's available memory");
   mem->add_option("-t,--threads", o->threads, "Threads per level (0 = all)")->check(CLI::Range(0, 4096));
-  mem->add_option("--plot-script", o->plotScript, "Chart script (python3-matplotlib)");
+  mem->add_option("--plot-script", o->plotScript, "Chart script (python3-matplotlib)")
+      ->default_str("<data>/tools/plot_memory.py");
   mem->add_flag("--no-chart", o->noChart, "Write CSV and JSON only");
   mem->callback([o] { runStudyMemory(*o); });
 
@@ -264,17 +267,20 @@ void addStudyCommand(CLI::App& app) {
     CLI::App* cmd = study->add_subcommand(kind, help);
     cmd->add_option("scene", so->scenePath, "Scene file (JSON)")->required();
     cmd->add_option("--reference", so->referencePath, "Converged reference image (EXR)")->required();
-    cmd->add_option("-o,--output", so->outDir, "Output folder (default out/study-" + std::string(kind) + ")");
-    cmd->add_option("--res", so->resolution, "Resolution WIDTHxHEIGHT (the reference's)");
+    cmd->add_option("-o,--output", so->outDir, "Output folder");
+    cmd->add_option("--res", so->resolution, "Resolution WIDTHxHEIGHT (the reference's)")
+      ->default_str("the reference's");
     cmd->add_option("-j,--jobs", so->jobsInFlight, "Renders in flight")->check(CLI::Range(1, 1024));
     cmd->add_option("-t,--threads", so->threads, "Threads per render (0 = all)")->check(CLI::Range(0, 4096));
     cmd->add_flag("--quick", so->quick, "A few cheap settings (for tests)");
-    cmd->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)");
+    cmd->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)")
+      ->default_str("<data>/tools/plot_study.py");
     cmd->add_flag("--no-chart", so->noChart, "Write CSV and JSON only");
     if (std::string(kind) == "levels")
       cmd->add_option("--photons", so->photons, "Photon counts, a second axis (levels x photons; default: the scene's)")
           ->check(CLI::Range(int64_t(1), int64_t(1) << 40))
-          ->delimiter(',');
+          ->delimiter(',')
+      ->default_str("the scene's");
     addSchedulerOptions(*cmd, so->scheduler);
     cmd->callback([so] { runSweepStudy(*so); });
   }

@@ -128,7 +128,7 @@ struct StructuresOptions {
   std::string outDir = "out/study-structures";
   bool quick = false;
   bool noChart = false;
-  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_study.py";
+  std::string plotScript;  // empty: dataPath("tools/plot_study.py")
 };
 
 void runStructuresStudy(StructuresOptions o) {
@@ -139,7 +139,7 @@ void runStructuresStudy(StructuresOptions o) {
   } else if (o.meshes.empty() && o.generate.empty()) {
     // The study's meshes: the bunny and the dragon (tools/fetch_models.sh) and 10M triangles.
     for (const char* m : {"bunny.ply", "dragon_vrip.ply"}) {
-      const std::string p = std::string(VOXCONE_TOOLS_DIR) + "/../data/models/" + m;
+      const std::string p = dataPath(std::string("data/models/") + m);
       if (fs::exists(p)) o.meshes.push_back(fs::canonical(p).string());
       else std::fprintf(stderr, "study structures: %s missing (bash tools/fetch_models.sh), left out\n", m);
     }
@@ -214,7 +214,7 @@ void runStructuresStudy(StructuresOptions o) {
                 f("render_vs_hbvh"), f("pixels_differing_from_hbvh"));
   }
   std::printf("wrote %s.csv, %s.json\n", stem.c_str(), stem.c_str());
-  if (!o.noChart) runChartScript(o.plotScript, stem + ".json", stem);
+  if (!o.noChart) runChartScript(o.plotScript.empty() ? dataPath("tools/plot_study.py") : o.plotScript, stem + ".json", stem);
 }
 
 struct ScalingOptions {
@@ -228,7 +228,7 @@ struct ScalingOptions {
   std::string outDir = "out/study-scaling";
   bool quick = false;
   bool noChart = false;
-  std::string plotScript = std::string(VOXCONE_TOOLS_DIR) + "/plot_study.py";
+  std::string plotScript;  // empty: dataPath("tools/plot_study.py")
 };
 
 void runScalingStudy(ScalingOptions o) {
@@ -344,7 +344,7 @@ void runScalingStudy(ScalingOptions o) {
                 s["render"].is_number() ? s["render"].get<double>() : NAN,
                 s["total"].is_number() ? s["total"].get<double>() : NAN);
   std::printf("wrote %s.json, %s-threads.csv, %s-triangles.csv\n", stem.c_str(), stem.c_str(), stem.c_str());
-  if (!o.noChart) runChartScript(o.plotScript, stem + ".json", stem);
+  if (!o.noChart) runChartScript(o.plotScript.empty() ? dataPath("tools/plot_study.py") : o.plotScript, stem + ".json", stem);
 }
 
 }  // namespace
@@ -353,34 +353,40 @@ void addStructureStudies(CLI::App& study) {
   auto so = std::make_shared<StructuresOptions>();
   CLI::App* s = study.add_subcommand(
       "structures", "HBVH against a plain AABB BVH and an SAH kd-tree: build time, memory, render time per mesh");
-  s->add_option("meshes", so->meshes, "Meshes (PLY/OBJ); default: bunny, dragon and a generated 10M-triangle knot");
-  s->add_option("--generate", so->generate, "Also generated knot meshes of these triangle counts");
+  s->add_option("meshes", so->meshes, "Meshes (PLY/OBJ); default: bunny, dragon and a generated 10M-triangle knot")
+      ->default_str("bunny, dragon (tools/fetch_models.sh) and a generated 10M-triangle knot");
+  s->add_option("--generate", so->generate, "Also generated knot meshes of these triangle counts")
+      ->default_str("none");
   s->add_option("--accels", so->accels, "Structures to compare")->check(CLI::IsMember(accelKinds()))->delimiter(',');
-  s->add_option("--method", so->method, "Integrator of the renders (default path)");
-  s->add_option("--spp", so->spp, "Samples per pixel (default 4)")->check(CLI::Range(1, 1 << 20));
-  s->add_option("--res", so->resolution, "Resolution (default 256x256)");
+  s->add_option("--method", so->method, "Integrator of the renders");
+  s->add_option("--spp", so->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 20));
+  s->add_option("--res", so->resolution, "Resolution");
   s->add_option("-t,--threads", so->threads, "Threads per render (0 = all)")->check(CLI::Range(0, 4096));
-  s->add_option("-o,--output", so->outDir, "Output folder (default out/study-structures)");
+  s->add_option("-o,--output", so->outDir, "Output folder");
   s->add_flag("--quick", so->quick, "Two small generated meshes at 24x24, 1 spp (for tests)");
-  s->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)");
+  s->add_option("--plot-script", so->plotScript, "Chart script (python3-matplotlib)")
+      ->default_str("<data>/tools/plot_study.py");
   s->add_flag("--no-chart", so->noChart, "Write CSV and JSON only");
   s->callback([so] { runStructuresStudy(*so); });
 
   auto sc = std::make_shared<ScalingOptions>();
   CLI::App* c = study.add_subcommand("scaling", "Time against thread count and against triangle count");
   c->add_option("scene", sc->scenePath, "Scene for the thread-count renders (JSON)")->required();
-  c->add_option("--thread-counts", sc->threadCounts, "Thread counts (default 1, 2, 4, ... all)")
+  c->add_option("--thread-counts", sc->threadCounts, "Thread counts")
       ->check(CLI::Range(1, 4096))
-      ->delimiter(',');
-  c->add_option("--triangles", sc->triangles, "Generated knot sizes (default 10k, 100k, 1M, 10M)")->delimiter(',');
-  c->add_option("--methods", sc->methods, "Integrators (default path,voxcone)")->delimiter(',');
-  c->add_option("--spp", sc->spp, "Samples per pixel (default 4)")->check(CLI::Range(1, 1 << 20));
-  c->add_option("--res", sc->resolution, "Resolution (default 256x256)");
+      ->delimiter(',')
+      ->default_str("1, 2, 4, ... all");
+  c->add_option("--triangles", sc->triangles, "Generated knot sizes")->delimiter(',')
+      ->default_str("10k, 100k, 1M, 10M");
+  c->add_option("--methods", sc->methods, "Integrators")->delimiter(',');
+  c->add_option("--spp", sc->spp, "Samples per pixel")->check(CLI::Range(1, 1 << 20));
+  c->add_option("--res", sc->resolution, "Resolution");
   c->add_option("-t,--threads", sc->threads, "Threads of the triangle-count renders (0 = all)")
       ->check(CLI::Range(0, 4096));
-  c->add_option("-o,--output", sc->outDir, "Output folder (default out/study-scaling)");
+  c->add_option("-o,--output", sc->outDir, "Output folder");
   c->add_flag("--quick", sc->quick, "1 and 2 threads, 1000 and 4000 triangles, 24x24, 1 spp (for tests)");
-  c->add_option("--plot-script", sc->plotScript, "Chart script (python3-matplotlib)");
+  c->add_option("--plot-script", sc->plotScript, "Chart script (python3-matplotlib)")
+      ->default_str("<data>/tools/plot_study.py");
   c->add_flag("--no-chart", sc->noChart, "Write CSV and JSON only");
   c->callback([sc] { runScalingStudy(*sc); });
 }

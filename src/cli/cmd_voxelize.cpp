@@ -165,18 +165,22 @@ void addVoxelizeCommand(CLI::App& app) {
   cmd->add_option("--caustic-level", o->causticLevel,
                   "Level of the caustic grid (0: none; default: when the scene has specular surfaces, level + 1 "
                   "up to 10, never below level)")
-      ->check(CLI::Range(0, 13));
-  cmd->add_option("--photons", o->photons, "Photons emitted for the global map (default: the scene's render.photons)")
-      ->check(CLI::Range(int64_t(0), int64_t(1) << 36));
-  cmd->add_option("--caustic-photons", o->causticPhotons, "Photons emitted for the caustic map (default: the scene's)")
-      ->check(CLI::Range(int64_t(0), int64_t(1) << 36));
+      ->check(CLI::Range(0, 13))
+      ->default_str("level + 1 up to 10 with specular surfaces, else 0");
+  cmd->add_option("--photons", o->photons, "Photons emitted for the global map")
+      ->check(CLI::Range(int64_t(0), int64_t(1) << 36))
+      ->default_str("the scene's render.photons");
+  cmd->add_option("--caustic-photons", o->causticPhotons, "Photons emitted for the caustic map")
+      ->check(CLI::Range(int64_t(0), int64_t(1) << 36))
+      ->default_str("the scene's");
   cmd->add_option("--seed", o->seed, "Random seed");
   cmd->add_option("-o,--output", o->output, "Write all grids and levels to this .vdb file");
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--memory-budget-mb", o->memoryBudgetMb,
                   "Refuse a level whose estimated memory exceeds this many MB, before allocating (0: no budget; "
                   "default: the machine's available memory)")
-      ->check(CLI::Range(0.0, 1e12));
+      ->check(CLI::Range(0.0, 1e12))
+      ->default_str("the machine's available memory");
   cmd->add_flag("--measure-quantization", o->measureQuantization,
                 "Measure the error each compact encoding adds (in the --json output and the table's last line; "
                 "slows voxelizing a little)");

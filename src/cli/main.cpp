@@ -1,7 +1,9 @@
 // voxcone: the command-line front end. Usage and library errors become one line on stderr and
 // exit 2.
 
+#include "cli_util.h"
 #include "commands.h"
+#include "version.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/progress.h"
 
@@ -42,7 +44,10 @@ std::string printable(const char* what) {
 int main(int argc, char** argv) {
   CLI::App app{"voxcone: physically based rendering with exact hits and voxel cone gathering"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "voxcone 0.1.0");
+  app.set_version_flag("--version", std::string("voxcone ") + voxcone::kVersion + " (" + voxcone::kBuildType + ")");
+  // Every option's help shows its default (subcommands inherit this); options whose default
+  // is another source's value (the scene's spp, say) name that source instead.
+  app.option_defaults()->always_capture_default();
   voxcone::addRenderCommand(app);
   voxcone::addCompareCommand(app);
   voxcone::addInfoCommand(app);
@@ -51,6 +56,7 @@ int main(int argc, char** argv) {
   voxcone::addBatchCommand(app);
   voxcone::addGenerateCommand(app);
   voxcone::installInterruptHandler();
+  voxcone::setCommandLine(argc, argv);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

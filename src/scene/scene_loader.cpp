@@ -412,6 +412,7 @@ private:
       std::filesystem::path p(file);
       if (p.is_relative()) p = std::filesystem::path(m_baseDir) / p;
       TriangleMesh mesh;
+      m_scene.inputFiles.push_back(p.string());
       try {
         mesh = loadMesh(p.string());
       } catch (const Error& e) {
@@ -517,7 +518,9 @@ Scene loadScene(const std::string& path) {
   std::ostringstream ss;
   ss << in.rdbuf();
   const std::string dir = std::filesystem::path(path).parent_path().string();
-  return parseScene(ss.str(), path, dir.empty() ? "." : dir);
+  Scene scene = parseScene(ss.str(), path, dir.empty() ? "." : dir);
+  scene.inputFiles.insert(scene.inputFiles.begin(), path);
+  return scene;
 }
 
 }  // namespace voxcone

@@ -4,8 +4,10 @@
 #include "../support/test_scenes.h"
 #include "voxcone/image/image_io.h"
 
+#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <xxhash.h>
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -161,6 +163,84 @@ TEST(Cli, RenderWritesExrPngAndSidecar) {
   EXPECT_EQ(std::distance(fs::directory_iterator(d), fs::directory_iterator()), 3);
 }
 
+/// Standard output of `voxcone ARGS` (stderr discarded) and its exit status.
+std::pair<int, std::string> runStdout(const std::string& args) {
+  FILE* p = ::popen((std::string(VOXCONE_CLI_PATH) + " " + args + " 2>/dev/null").c_str(), "r");
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int status = ::pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+/// XXH3-128 of a whole file read at once, as `xxhsum -H2` prints it (not the streaming code
+/// the renderer uses).
+std::string wholeFileXxh128(const fs::path& file) {
+  std::ifstream f(file, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const XXH128_hash_t h = XXH3_128bits(bytes.data(), bytes.size());
+  char hex[33];
+  std::snprintf(hex, sizeof hex, "%016llx%016llx", (unsigned long long)h.high64, (unsigned long long)h.low64);
+  return hex;
+}
+
+TEST(Cli, VersionIsTheProjectsAndHelpShowsDefaults) {
+  const auto [code, out] = runStdout("--version");
+  EXPECT_EQ(code, 0);
+  EXPECT_EQ(out.rfind(std::string("voxcone ") + VOXCONE_PROJECT_VERSION + " (", 0), 0u) << out;
+  const auto [hcode, help] = runStdout("render --help");
+  EXPECT_EQ(hcode, 0);
+  for (const char* shown : {"--spp INT:INT in [1 - 16777216]=the scene's", "--accel TEXT:{", "=hbvh",
+                            "-t,--threads INT:INT in [0 - 4096]=0", "-o,--output TEXT:NONEMPTY=out/<scene>"})
+    EXPECT_NE(help.find(shown), std::string::npos) << shown << " not in:\n" << help;
+  const auto [vcode, vhelp] = runStdout("voxelize --help");
+  EXPECT_NE(vhelp.find("--level INT:INT in [1 - 13]=8"), std::string::npos) << vhelp;
+  EXPECT_EQ(vhelp.find("=-1"), std::string::npos) << "a sentinel shown as a default:\n" << vhelp;
+}
+
+TEST(Cli, SidecarAndImagesRecordWhatTheImageWasMadeFrom) {
+  // The full command line, the absolute scene path and a content hash of the scene and of
+  // every mesh it loads; the EXR's attributes typed, the PNG's as text.
+  const fs::path d = freshDir("cli_provenance");
+  std::ofstream(d / "tri.obj") << "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n";
+  std::ofstream(d / "scene.json") << R"({"camera": {"position": [0,0,-3], "target": [0,0,0], "fov_y_deg": 40},
+    "render": {"width": 8, "height": 8, "spp": 1, "method": "path"},
+    "materials": {"m": {"type": "lambertian", "albedo": 0.5, "emission": 1, "two_sided_emission": true}},
+    "shapes": [{"type": "mesh", "file": "tri.obj", "material": "m"}]})";
+  const std::vector<std::string> args = {"render", "scene.json", "-q", "--seed", "3", "-o", (d / "img.exr").string()};
+  std::string line;
+  for (const std::string& a : args) line += " " + a;
+  // From the scene's folder, the scene named relatively.
+  const int status = std::system(("cd " + d.string() + " && " + VOXCONE_CLI_PATH + line).c_str());
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << status;
+  std::ifstream f(d / "img.json");
+  const nlohmann::json j = nlohmann::json::parse(f);
+  std::vector<std::string> expected = {VOXCONE_CLI_PATH};
+  expected.insert(expected.end(), args.begin(), args.end());
+  EXPECT_EQ(j["command_line"].get<std::vector<std::string>>(), expected);
+  EXPECT_EQ(j["working_directory"], fs::canonical(d).string());
+  EXPECT_EQ(j["scene"], (fs::canonical(d) / "scene.json").string());
+  EXPECT_EQ(j["voxcone_version"], VOXCONE_PROJECT_VERSION);
+  ASSERT_EQ(j["inputs"].size(), 2u) << j["inputs"];
+  EXPECT_EQ(j["inputs"][0]["role"], "scene");
+  EXPECT_EQ(j["inputs"][0]["xxh128"], wholeFileXxh128(d / "scene.json"));
+  EXPECT_EQ(j["inputs"][0]["bytes"], fs::file_size(d / "scene.json"));
+  EXPECT_EQ(j["inputs"][1]["role"], "mesh");
+  EXPECT_EQ(j["inputs"][1]["path"], (fs::canonical(d) / "tri.obj").string());
+  EXPECT_EQ(j["inputs"][1]["xxh128"], wholeFileXxh128(d / "tri.obj"));
+  auto exr = OIIO::ImageInput::open((d / "img.exr").string());
+  ASSERT_TRUE(exr);
+  const OIIO::ParamValue* spp = exr->spec().find_attribute("voxcone:settings.spp");
+  ASSERT_NE(spp, nullptr);
+  EXPECT_EQ(spp->type(), OIIO::TypeInt);
+  EXPECT_EQ(exr->spec().get_string_attribute("voxcone:method"), "path");
+  auto png = OIIO::ImageInput::open((d / "img.png").string());
+  ASSERT_TRUE(png);
+  EXPECT_EQ(png->spec().get_string_attribute("voxcone:settings.seed"), "3");
+  EXPECT_EQ(png->spec().get_string_attribute("Software"), std::string("voxcone ") + VOXCONE_PROJECT_VERSION);
+}
+
 TEST(Cli, SamplerIsChosenAndRecorded) {
   // --sampler picks the pixel sampler and the sidecar says which; the two give different images
   // of the same scene and seed.
@@ -203,6 +283,8 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --seed -1 -o " + (d / "j").string(),
       "render " + scenes + "cornell-box.json -q --method '' -o " + (d / "k").string(),
       "render " + scenes + "cornell-box.json -q -o ''",
+      // Was written as x.tiff.exr, x.tiff.png, x.tiff.json.
+      "render " + scenes + "cornell-box.json -q -o " + (d / "p.tiff").string(),
       "info /nonexistent.json",
       "compare /nonexistent1.exr /nonexistent2.exr",
       // Usage errors (CLI11 exited 105-114 with a second "Run with --help" line).

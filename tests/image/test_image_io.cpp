@@ -126,11 +126,91 @@ TEST_F(ImageIoTest, ExrRoundTripBitExactWithMetadata) {
   const OIIO::ImageSpec& spec = in->spec();
   EXPECT_EQ(spec.format, OIIO::TypeDesc::FLOAT);
   EXPECT_EQ(spec.nchannels, 3);
-  EXPECT_EQ(spec.get_string_attribute("voxcone:seed"), "42");
-  EXPECT_EQ(nlohmann::json::parse(spec.get_string_attribute("voxcone:settings")), meta["settings"]);
   EXPECT_EQ(nlohmann::json::parse(spec.get_string_attribute("voxcone:metadata")), meta);
   in->close();
   EXPECT_EQ(entries(), std::vector<std::string>{"out.exr"});
+}
+
+TEST_F(ImageIoTest, ExrMetadataIsTypedAttributes) {
+  const nlohmann::json meta = {{"seed", 42},
+                               {"big_seed", uint64_t(1) << 40},
+                               {"partial", true},
+                               {"settings", {{"spp", 16}, {"method", "path"}, {"integrator", {{"cone_angle", 0.5}}}}},
+                               {"command_line", {"voxcone", "render", "a b.json"}},
+                               {"nothing", nullptr}};
+  const std::string file = path("typed.exr");
+  writeExr(file, Image(2, 2, Vec3(0.5f)), meta);
+  auto in = OIIO::ImageInput::open(file);
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec& spec = in->spec();
+  const auto type = [&](const char* name) {
+    const OIIO::ParamValue* p = spec.find_attribute(name);
+    return p ? p->type() : OIIO::TypeUnknown;
+  };
+  EXPECT_EQ(type("voxcone:seed"), OIIO::TypeInt);
+  EXPECT_EQ(spec.get_int_attribute("voxcone:seed"), 42);
+  EXPECT_EQ(type("voxcone:partial"), OIIO::TypeInt);
+  EXPECT_EQ(spec.get_int_attribute("voxcone:partial"), 1);
+  EXPECT_EQ(type("voxcone:settings.spp"), OIIO::TypeInt);
+  EXPECT_EQ(spec.get_int_attribute("voxcone:settings.spp"), 16);
+  EXPECT_EQ(type("voxcone:settings.method"), OIIO::TypeString);
+  EXPECT_EQ(spec.get_string_attribute("voxcone:settings.method"), "path");  // not "\"path\""
+  EXPECT_EQ(type("voxcone:settings.integrator.cone_angle"), OIIO::TypeFloat);
+  EXPECT_FLOAT_EQ(spec.get_float_attribute("voxcone:settings.integrator.cone_angle"), 0.5f);
+  // Past int's range a number is its exact decimal text; an array its JSON; null nothing.
+  EXPECT_EQ(spec.get_string_attribute("voxcone:big_seed"), "1099511627776");
+  EXPECT_EQ(nlohmann::json::parse(spec.get_string_attribute("voxcone:command_line")), meta["command_line"]);
+  EXPECT_EQ(spec.find_attribute("voxcone:nothing"), nullptr);
+  EXPECT_EQ(spec.find_attribute("voxcone:settings"), nullptr);
+}
+
+TEST_F(ImageIoTest, ExrLayersRoundTripAndReadImageTakesRgbByName) {
+  const Image im = testPattern(5, 3, 2);
+  ImageLayer albedo{"albedo", {"Albedo.R", "Albedo.G", "Albedo.B"}, {}};
+  ImageLayer depth{"depth", {"Z"}, {}};
+  for (size_t i = 0; i < im.pixels.size(); ++i) {
+    for (int c = 0; c < 3; ++c) albedo.values.push_back(0.1f * float(c + 1) + float(i));
+    depth.values.push_back(100.0f + float(i));
+  }
+  const std::string file = path("layers.exr");
+  writeExr(file, im, nullptr, nullptr, {albedo, depth});
+  auto in = OIIO::ImageInput::open(file);
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec spec = in->spec();
+  ASSERT_EQ(spec.nchannels, 7);
+  std::vector<float> all(im.pixels.size() * 7);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 7, OIIO::TypeDesc::FLOAT, all.data()));
+  in->close();
+  const auto channel = [&](const std::string& n) {
+    const auto it = std::find(spec.channelnames.begin(), spec.channelnames.end(), n);
+    EXPECT_NE(it, spec.channelnames.end()) << n;
+    return int(it - spec.channelnames.begin());
+  };
+  for (size_t i = 0; i < im.pixels.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(all[i * 7 + size_t(channel(std::string(1, "RGB"[c])))], im.pixels[i][c]);
+      EXPECT_EQ(all[i * 7 + size_t(channel(std::string("Albedo.") + "RGB"[c]))], albedo.values[i * 3 + size_t(c)]);
+    }
+    EXPECT_EQ(all[i * 7 + size_t(channel("Z"))], depth.values[i]);
+  }
+  const Image back = readImage(file);
+  for (size_t i = 0; i < im.pixels.size(); ++i)
+    for (int c = 0; c < 3; ++c) ASSERT_TRUE(sameBits(back.pixels[i][c], im.pixels[i][c])) << i << " " << c;
+  // A layer of the wrong size is refused before anything is written.
+  depth.values.pop_back();
+  EXPECT_THROW(writeExr(path("bad.exr"), im, nullptr, nullptr, {depth}), ImageError);
+  EXPECT_FALSE(fs::exists(path("bad.exr")));
+}
+
+TEST_F(ImageIoTest, PngCarriesMetadataAsText) {
+  const nlohmann::json meta = {{"voxcone_version", "9.8.7"}, {"method", "voxcone"}, {"settings", {{"spp", 4}}}};
+  const std::string file = path("meta.png");
+  writePng(file, Image(3, 2, Vec3(0.25f)), nullptr, meta);
+  auto in = OIIO::ImageInput::open(file);
+  ASSERT_TRUE(in);
+  EXPECT_EQ(in->spec().get_string_attribute("Software"), "voxcone 9.8.7");
+  EXPECT_EQ(in->spec().get_string_attribute("voxcone:method"), "voxcone");
+  EXPECT_EQ(in->spec().get_string_attribute("voxcone:settings.spp"), "4");
 }
 
 TEST_F(ImageIoTest, ExrOverwritesExisting) {

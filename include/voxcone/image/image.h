@@ -4,6 +4,7 @@
 
 #include "voxcone/core/math.h"
 
+#include <string>
 #include <vector>
 
 namespace voxcone {
@@ -28,6 +29,15 @@ struct Image {
     for (const Vec3& p : pixels) s += double(p.x) + double(p.y) + double(p.z);
     return pixels.empty() ? 0.0 : s / (3.0 * double(pixels.size()));
   }
+};
+
+/// Channels written beside an image's RGB (an AOV such as albedo or depth): EXR channel names
+/// ("Albedo.R", "Z"; the part before the dot is the layer) and width * height * channels.size()
+/// values, pixel by pixel, row 0 at the top.
+struct ImageLayer {
+  std::string name;                   ///< what asked for it (--aov albedo)
+  std::vector<std::string> channels;
+  std::vector<float> values;
 };
 
 }  // namespace voxcone

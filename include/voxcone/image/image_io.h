@@ -6,7 +6,7 @@
 
 #include "voxcone/image/image.h"
 
-#include <nlohmann/json_fwd.hpp>
+#include <nlohmann/json.hpp>
 
 #include <functional>
 #include <mutex>
@@ -40,13 +40,28 @@ private:
   bool m_committed = false;
 };
 
-/// Write linear float RGB OpenEXR. Every top-level key of `metadata` becomes an EXR string
-/// attribute "voxcone:<key>" (its JSON dump). Atomic, or part of `set`. Throws ImageError.
-void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata, OutputSet* set = nullptr);
+/// Write linear float RGB OpenEXR, with `layers` as further float channels (AOVs). `metadata`
+/// becomes typed attributes (metadataAttributes: voxcone:method a string, voxcone:settings.spp
+/// an int, voxcone:timings.render_seconds a float) plus the whole of it as JSON in
+/// "voxcone:metadata". Atomic, or part of `set`. Throws ImageError.
+void writeExr(const std::string& path, const Image& image, const nlohmann::json& metadata, OutputSet* set = nullptr,
+              const std::vector<ImageLayer>& layers = {});
 
-/// Write an 8-bit sRGB PNG (linear values clamped to [0,1], sRGB OETF, rounded). Atomic, or
-/// part of `set`. Throws ImageError.
-void writePng(const std::string& path, const Image& image, OutputSet* set = nullptr);
+/// Write an 8-bit sRGB PNG (linear values clamped to [0,1], sRGB OETF, rounded). `metadata`'s
+/// attributes become PNG tEXt chunks (PNG text has no types: each value as text), with
+/// Software naming voxcone. Atomic, or part of `set`. Throws ImageError.
+void writePng(const std::string& path, const Image& image, OutputSet* set = nullptr,
+              const nlohmann::json& metadata = nullptr);
+
+/// One attribute of an image's metadata: the JSON path joined by dots under "voxcone:", and a
+/// scalar value (string, integer, float or bool).
+struct MetadataAttribute {
+  std::string name;
+  nlohmann::json value;
+};
+/// `metadata` flattened into attributes: objects are descended (to 4 levels), scalars kept
+/// with their type, arrays and deeper objects stored as their JSON text, nulls left out.
+std::vector<MetadataAttribute> metadataAttributes(const nlohmann::json& metadata);
 
 /// Write by extension: .exr (float, metadata) or .png (sRGB 8-bit). Throws ImageError.
 void writeImage(const std::string& path, const Image& image, const nlohmann::json& metadata);

@@ -87,6 +87,9 @@ public:
   Camera camera;
   RenderSettings render;
   std::string sourcePath;              ///< file the scene came from (for messages and sidecars)
+  /// Every file the scene was read from, in load order: the scene file itself (when it came from
+  /// one), then each mesh (sidecars record their content hashes).
+  std::vector<std::string> inputFiles;
 
   /// Precompute the light distribution and bounds; call once after filling the fields.
   void finalize();
