@@ -24,7 +24,7 @@ repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 models="$repo_root/data/models"
 
 for tool in npm node gzip tar; do
-  command -v "$tool" >/dev/null 2>&1 || die "'$tool' is not installed"
+  command -v "$tool" >/dev/null 2>&1 || die "'$tool' is not installed (bash tools/setup.sh models installs it, then fetches)"
 done
 
 mkdir -p "$models" || die "cannot create $models"

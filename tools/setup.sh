@@ -2,6 +2,7 @@
 # voxcone set-up on a new Debian 12 machine: install what is missing, build, then render or test.
 #   tools/setup.sh render [voxcone render args...]   release build, renders the default scene
 #   tools/setup.sh test                               release build with tests, runs ctest
+#   tools/setup.sh models                             npm and node if missing, then tools/fetch_models.sh
 #   tools/setup.sh deps | build                       only install / only build
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -43,10 +44,20 @@ case "$cmd" in
     ;;
   test)
     # Embree: `--accel embree` and its tests; slurm-wlm and munge: the Slurm self-test
-    # (ctest SlurmSelftest starts its own one-node cluster).
-    install_deps python3-matplotlib libembree-dev slurm-wlm munge
+    # (ctest SlurmSelftest starts its own one-node cluster); oiiotool: the test that reads an
+    # output's attributes and layers as a user would.
+    install_deps python3-matplotlib libembree-dev slurm-wlm munge openimageio-tools
     build ON
     ctest --test-dir build --output-on-failure -j "$(nproc)"
     ;;
-  *) echo "usage: tools/setup.sh render|test|deps|build" >&2; exit 2 ;;
+  models)
+    # fetch_models.sh runs `npm pack` and node; a machine with node from elsewhere (its own npm)
+    # keeps it: only missing commands are installed.
+    need=(gzip tar)
+    command -v node >/dev/null 2>&1 || need+=(nodejs)
+    command -v npm >/dev/null 2>&1 || need+=(npm)
+    install_deps "${need[@]}"
+    bash tools/fetch_models.sh
+    ;;
+  *) echo "usage: tools/setup.sh render|test|models|deps|build" >&2; exit 2 ;;
 esac

@@ -80,7 +80,7 @@ std::string dataRoot() {
     return env;
   }
   const fs::path bin = fs::path(selfExe()).parent_path();
-  for (const fs::path& root : {bin / ".." / "share" / "voxcone", bin / ".."}) {
+  for (const fs::path& root : {bin / VOXCONE_DATA_FROM_BIN, bin / ".."}) {
     std::error_code ec;
     if (fs::is_regular_file(root / "tools" / "plot_study.py", ec)) return fs::weakly_canonical(root, ec).string();
   }

@@ -45,7 +45,8 @@ const std::vector<std::string>& commandLine();
 
 /// The folder holding voxcone's tools/ and data/ (chart scripts, scenes, fetched models), found
 /// relative to the running executable so that a build tree and an installed copy both work:
-/// $VOXCONE_DATA_DIR if set, else <bin>/../share/voxcone (cmake --install), else <bin>/.. when
+/// $VOXCONE_DATA_DIR if set, else <bin>/../share/voxcone (cmake --install; the relative path
+/// CMake's install directories give), else <bin>/.. when
 /// it holds tools/plot_study.py (a build folder inside the source tree). Throws SettingsError.
 std::string dataRoot();
 /// dataRoot() + "/" + relative.

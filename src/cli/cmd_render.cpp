@@ -47,6 +47,7 @@ struct RenderOptions {
   std::string field;              // --field: a .vdb to render with (voxcone)
   double memoryBudgetMb = -1.0;   // --memory-budget-mb (voxcone); -1: not given
   bool writePartial = false;      // --write-partial: an interrupted render writes its complete passes
+  std::string aovs;               // --aov: layers beside the beauty (integrator.h Aov)
   bool quiet = false;
 };
 
@@ -114,6 +115,11 @@ void runRender(const RenderOptions& o) {
   if (o.maxDepth != 0) settings.maxDepth = o.maxDepth;
   if (!o.sampler.empty()) settings.sampler = samplerKindFromName(o.sampler);
   settings.validate();
+  AovRequest aovs;
+  if (!o.aovs.empty()) {
+    aovs.layers = parseAovs(o.aovs);
+    if (autoSettings) throw SettingsError("--aov with --target-error / --time-budget: the passes are averaged images, not layers");
+  }
 
   nlohmann::json options;
   try {
@@ -166,6 +172,7 @@ void runRender(const RenderOptions& o) {
   t.reset();
   const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
   const double buildSec = t.seconds();
+  aovs.accel = accel.get();
 
   // --target-error / --time-budget: voxcone in averaged passes until the predicted error meets
   // the target or the budget is spent (auto_settings.h).
@@ -193,10 +200,16 @@ void runRender(const RenderOptions& o) {
   } else {
     IntegratorContext ctx{scene, *accel, settings, options};
     integrator = createIntegrator(settings.method, ctx);
+    // Term layers need an integrator that separates them: known before anything is traced.
+    if (!integrator->separatesTerms())
+      for (Aov a : aovs.layers)
+        if (isTermAov(a))
+          throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + settings.method +
+                              " does not separate its terms (path, whitted and voxcone do)");
     t.reset();
     integrator->prepare(&progress);
     prepareSec = t.seconds();
-    result = renderImage(scene, *integrator, settings, &progress, o.writePartial);
+    result = renderImage(scene, *integrator, settings, &progress, o.writePartial, &aovs);
   }
   // Interrupted with --write-partial: the image holds the passes that completed, written as a
   // complete set that says so (sidecar "partial", EXR voxcone:partial, spp the samples taken).
@@ -217,6 +230,11 @@ void runRender(const RenderOptions& o) {
                       {"sampler", samplerNames()[size_t(settings.sampler)]}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
+  if (!result.layers.empty()) {
+    nlohmann::json layers = nlohmann::json::object();
+    for (const ImageLayer& l : result.layers) layers[l.name] = l.channels;
+    meta["aovs"] = layers;
+  }
   if (result.partial) {
     meta["partial"] = true;
     meta["requested_spp"] = requestedSpp;
@@ -243,7 +261,7 @@ void runRender(const RenderOptions& o) {
   writes.run([&] {
     try {
       Timer te;
-      writeExr(exrPath, result.image, meta, &files);
+      writeExr(exrPath, result.image, meta, &files, result.layers);
       exrSec = te.seconds();
     } catch (...) {
       exrError = std::current_exception();
@@ -336,6 +354,11 @@ void addRenderCommand(CLI::App& app) {
                 "image marked partial, with its spp; the exit status still says interrupted (128 + the signal). "
                 "Not for voxcone, whose samples are one pass")
       ->default_str("");
+  cmd->add_option("--aov", o->aovs,
+                  "Layers written into the EXR beside RGB, comma-separated: albedo (Albedo.RGB), normal (Ns.XYZ), "
+                  "depth (Z): the first hit, box-filtered; emitted, direct, indirect, caustic (Emitted.RGB ...): "
+                  "the radiance's terms, which add up to RGB (path, whitted, voxcone)")
+      ->default_str("none");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

@@ -19,8 +19,22 @@ nlohmann::json PathIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}, {"light_sampling", m_nee ? "nee" : "none"}};
 }
 
-Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
+Vec3 PathIntegrator::li(const Ray& ray, Sampler& sampler) const { return trace(ray, sampler, nullptr); }
+
+Vec3 PathIntegrator::liTerms(const Ray& ray, Sampler& sampler, IndirectSplit*, RadianceTerms& terms) const {
+  return trace(ray, sampler, &terms);
+}
+
+Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms* terms) const {
   Vec3 L(0.0f), beta(1.0f);
+  int diffuseVertices = 0;       // non-delta vertices so far (terms)
+  bool deltaSinceDiffuse = false;// a delta vertex after the first non-delta one (terms)
+  // Which term light arriving at the current vertex from a light belongs to.
+  const auto term = [&](bool viaDelta) -> Vec3* {
+    if (diffuseVertices == 0) return &terms->emitted;
+    if (diffuseVertices > 1) return &terms->indirect;
+    return viaDelta ? &terms->caustic : &terms->direct;
+  };
   Ray ray = cameraRay;
   bool specularBounce = true;  // the camera vertex acts as a delta
   float prevPdf = 0.0f;        // solid-angle pdf of the BSDF sample that made `ray`
@@ -36,12 +50,15 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
     // Emission found by BSDF sampling, MIS-weighted against light sampling.
     const Vec3 Le = m_scene.emitted(sh, woWorld);
     if (!isBlack(Le)) {
+      Vec3 c;
       if (specularBounce || !m_nee) {
-        L += beta * Le;
+        c = beta * Le;
       } else {
         const float lightPdf = m_scene.lightPdf(prevPos, sh.triangle, pos, sh.geomNormal);
-        L += beta * Le * powerHeuristic(prevPdf, lightPdf);
+        c = beta * Le * powerHeuristic(prevPdf, lightPdf);
       }
+      L += c;
+      if (terms) *term(deltaSinceDiffuse) += c;
     }
     if (depth + 1 >= m_maxDepth) break;
 
@@ -59,12 +76,20 @@ Vec3 PathIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
             spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
         if (!isBlack(f) && !m_accel.occluded(shadow)) {
           const float w = ls.delta ? 1.0f : powerHeuristic(ls.pdf, bsdfPdf(mat, wo, wi));
-          L += beta * f * ls.radiance * (w / ls.pdf);
+          const Vec3 c = beta * f * ls.radiance * (w / ls.pdf);
+          L += c;
+          if (terms) {
+            ++diffuseVertices;  // this vertex, for the light it samples
+            *term(false) += c;
+            --diffuseVertices;
+          }
         }
       }
     }
 
     // Continue the path by sampling the BSDF.
+    if (!mat.isDelta()) ++diffuseVertices;
+    else if (diffuseVertices > 0) deltaSinceDiffuse = true;
     BsdfSample bs;
     if (!bsdfSampleFrom(mat, wo, sampler, bs)) break;
     beta *= bs.weight;

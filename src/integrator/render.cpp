@@ -1,3 +1,4 @@
+#include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/core/timer.h"
@@ -6,6 +7,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 
 namespace voxcone {
@@ -114,6 +116,100 @@ void runGathers(const Integrator& integrator, const std::vector<PendingGather>& 
   for (size_t p = 0; p < sum.size(); ++p) ib.indirect[p] += Vec3(sum[p] / double(spp));
 }
 
+/// Per-pixel sums of the AOV layers' channels (double, pixel-major, the layers in the order
+/// asked), one sample at a time, from the sample's camera ray and its RadianceTerms.
+class AovSums {
+public:
+  AovSums(const Scene& scene, const AovRequest* request, size_t pixels) : m_scene(scene) {
+    if (!request) return;
+    m_request = request;
+    for (Aov a : request->layers) {
+      m_offsets.push_back(m_channels);
+      m_channels += aovChannels(a).size();
+      m_firstHit = m_firstHit || !isTermAov(a);
+      m_terms = m_terms || isTermAov(a);
+    }
+    sums.assign(pixels * m_channels, 0.0);
+  }
+  bool active() const { return m_channels > 0; }
+  /// Whether a term layer is asked for (samples then go through liTerms).
+  bool terms() const { return m_terms; }
+
+  /// Add one sample of `pixel`.
+  void add(size_t pixel, const Ray& ray, const RadianceTerms& t) {
+    SurfaceHit sh;
+    const bool hit = m_firstHit && intersectSurface(m_scene, *m_request->accel, ray, sh);
+    double* out = &sums[pixel * m_channels];
+    for (size_t i = 0; i < m_request->layers.size(); ++i) {
+      double* o = out + m_offsets[i];
+      const auto put = [o](const Vec3& v) {
+        o[0] += double(v.x);
+        o[1] += double(v.y);
+        o[2] += double(v.z);
+      };
+      switch (m_request->layers[i]) {
+        case Aov::Albedo:
+          if (hit) {
+            const Material& m = m_scene.materials[sh.material];
+            put(m.isDiffuse() ? m.albedo : m.specular);
+          }
+          break;
+        case Aov::Normal:
+          if (hit) put(glm::dot(sh.geomNormal, ray.dir) <= 0.0f ? sh.shadingNormal : -sh.shadingNormal);
+          break;
+        case Aov::Depth:
+          if (hit) o[0] += double(glm::dot(sh.position - m_scene.camera.position(), m_scene.camera.forward()));
+          break;
+        case Aov::Emitted: put(t.emitted); break;
+        case Aov::Direct: put(t.direct); break;
+        case Aov::Caustic: put(t.caustic); break;
+        case Aov::Indirect: put(t.indirect); break;
+      }
+    }
+  }
+
+  /// The layers: each sum over `spp` samples; `filtered`, when given, is each pixel's filtered
+  /// indirect light, added to the Indirect layer as renderImage adds it to the beauty.
+  std::vector<ImageLayer> layers(int spp, const std::vector<Vec3>* filtered = nullptr) const {
+    std::vector<ImageLayer> out;
+    if (!active()) return out;
+    const size_t pixels = sums.size() / m_channels;
+    for (size_t i = 0; i < m_request->layers.size(); ++i) {
+      const Aov a = m_request->layers[i];
+      ImageLayer l{aovNames()[size_t(a)], aovChannels(a), {}};
+      const size_t nc = l.channels.size();
+      l.values.resize(pixels * nc);
+      for (size_t p = 0; p < pixels; ++p)
+        for (size_t c = 0; c < nc; ++c) {
+          float v = float(sums[p * m_channels + m_offsets[i] + c] / double(spp));
+          if (a == Aov::Indirect && filtered) v += (*filtered)[p][int(c)];
+          l.values[p * nc + c] = v;
+        }
+      out.push_back(std::move(l));
+    }
+    return out;
+  }
+
+  std::vector<double> sums;
+
+private:
+  const Scene& m_scene;
+  const AovRequest* m_request = nullptr;
+  std::vector<size_t> m_offsets;
+  size_t m_channels = 0;
+  bool m_firstHit = false, m_terms = false;
+};
+
+/// One sample's radiance: li, or with AOVs liTerms, whose terms and first hit go into `aovs`
+/// when the estimate is usable.
+Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, AovSums& aovs) {
+  if (!aovs.active()) return integrator.li(ray, sampler);
+  RadianceTerms terms;
+  const Vec3 L = aovs.terms() ? integrator.liTerms(ray, sampler, nullptr, terms) : integrator.li(ray, sampler);
+  if (usableRadiance(L)) aovs.add(pixel, ray, terms);
+  return L;
+}
+
 /// Samples per pass of a render without the indirect filter: 1, 1, 2, 4, ... up to 64, so that
 /// an interrupted render keeps complete passes of every pixel (at most 64 samples lost) and a
 /// short one pays few passes. A pure function of spp: the same passes on every machine.
@@ -133,12 +229,14 @@ std::vector<int> passSizes(int spp) {
 /// within a fraction of a second at any spp; with keepPartial it then returns the passes that
 /// completed as an image of fewer samples (RenderResult::partial), else throws CancelledError.
 RenderResult renderPasses(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                          Progress* progress, bool keepPartial) {
+                          Progress* progress, bool keepPartial, const AovRequest* aovRequest) {
   constexpr int kTile = 16;
   const int w = settings.width, h = settings.height;
   const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
   const size_t n = size_t(w) * size_t(h);
   std::vector<DVec3> sum(n, DVec3(0.0)), complete;  // complete: the sums after the last whole pass
+  AovSums aovs(scene, aovRequest, n);
+  std::vector<double> aovComplete;
   std::atomic<uint64_t> invalid{0};
   uint64_t invalidComplete = 0;
   std::atomic<bool> cancelled{false};
@@ -163,7 +261,7 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
             sampler.startSample(static_cast<uint32_t>(s));
             const Vec2 jitter = sampler.uniform2();
             const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
-            const Vec3 L = integrator.li(ray, sampler);
+            const Vec3 L = takeSample(integrator, ray, sampler, pixel, aovs);
             if (!usableRadiance(L)) ++bad;
             else sum[pixel] += DVec3(L);
           }
@@ -175,6 +273,7 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
     doneSpp += passSpp;
     if (keepPartial && doneSpp < settings.spp) {
       complete = sum;
+      aovComplete = aovs.sums;
       invalidComplete = invalid;
     }
   }
@@ -184,11 +283,13 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
   if (cancelled) {
     if (!keepPartial || doneSpp == 0) throw CancelledError();
     sum.swap(complete);
+    aovs.sums.swap(aovComplete);
     invalid = invalidComplete;
     result.partial = true;
   }
   if (progress) progress->finish();
   for (size_t p = 0; p < n; ++p) result.image.pixels[p] = Vec3(sum[p] / double(doneSpp));
+  result.layers = aovs.layers(doneSpp);
   result.stageSeconds["samples"] = timer.seconds();
   result.seconds = timer.seconds();
   result.samples = uint64_t(n) * uint64_t(doneSpp);
@@ -199,12 +300,69 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
 
 void Integrator::linkIndirect(IndirectBuffer& buffer) const { buffer.link.assign(buffer.indirect.size(), 0u); }
 
+Vec3 Integrator::liTerms(const Ray&, Sampler&, IndirectSplit*, RadianceTerms&) const {
+  throw Error(name() + " does not separate its terms");
+}
+
+const std::vector<std::string>& aovNames() {
+  static const std::vector<std::string> names = {"albedo", "normal", "depth", "emitted", "direct", "indirect", "caustic"};
+  return names;
+}
+
+std::vector<Aov> parseAovs(const std::string& list) {
+  std::vector<Aov> out;
+  size_t start = 0;
+  while (start <= list.size()) {
+    const size_t end = std::min(list.find(',', start), list.size());
+    const std::string name = list.substr(start, end - start);
+    const auto& names = aovNames();
+    const auto it = std::find(names.begin(), names.end(), name);
+    if (it == names.end()) {
+      std::string known;
+      for (const std::string& n : names) known += (known.empty() ? "" : ", ") + n;
+      throw SettingsError("--aov: unknown layer '" + name + "' (known: " + known + ")");
+    }
+    const Aov a = Aov(it - names.begin());
+    if (std::find(out.begin(), out.end(), a) != out.end()) throw SettingsError("--aov: " + name + " given twice");
+    out.push_back(a);
+    start = end + 1;
+  }
+  return out;
+}
+
+std::vector<std::string> aovChannels(Aov aov) {
+  const auto rgb = [](const std::string& layer) {
+    return std::vector<std::string>{layer + ".R", layer + ".G", layer + ".B"};
+  };
+  switch (aov) {
+    case Aov::Albedo: return rgb("Albedo");
+    case Aov::Normal: return {"Ns.X", "Ns.Y", "Ns.Z"};
+    case Aov::Depth: return {"Z"};
+    case Aov::Emitted: return rgb("Emitted");
+    case Aov::Direct: return rgb("Direct");
+    case Aov::Indirect: return rgb("Indirect");
+    case Aov::Caustic: return rgb("Caustic");
+  }
+  return {};
+}
+
+bool isTermAov(Aov aov) { return aov != Aov::Albedo && aov != Aov::Normal && aov != Aov::Depth; }
+
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                         Progress* progress, bool keepPartial) {
+                         Progress* progress, bool keepPartial, const AovRequest* aovRequest) {
   settings.validate();
+  if (aovRequest && aovRequest->layers.empty()) aovRequest = nullptr;
+  if (aovRequest) {
+    if (!aovRequest->accel) throw Error("renderImage: AOVs without an accelerator");
+    if (!integrator.separatesTerms())
+      for (Aov a : aovRequest->layers)
+        if (isTermAov(a))
+          throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + integrator.name() +
+                              " does not separate its terms (path, whitted and voxcone do)");
+  }
   const int filterRadius = integrator.indirectFilterRadius();
   const bool split = filterRadius > 0;
-  if (!split) return renderPasses(scene, integrator, settings, progress, keepPartial);
+  if (!split) return renderPasses(scene, integrator, settings, progress, keepPartial, aovRequest);
   constexpr int kTile = 16;
   const int w = settings.width, h = settings.height;
   const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
@@ -229,6 +387,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   std::vector<std::vector<EdgeSample>> tileEdges(tilePending.size());
   std::atomic<uint64_t> invalid{0};
   std::atomic<bool> cancelled{false};
+  AovSums aovs(scene, aovRequest, size_t(w) * size_t(h));
   if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
   Timer timer;
   tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
@@ -260,12 +419,14 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           const Vec2 jitter = sampler.uniform2();
           const Ray ray = scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, w, h);
           IndirectSplit sp;
-          const Vec3 L = split ? integrator.liSplit(ray, sampler, sp) : integrator.li(ray, sampler);
+          RadianceTerms terms;
+          const Vec3 L = aovs.terms() ? integrator.liTerms(ray, sampler, &sp, terms) : integrator.liSplit(ray, sampler, sp);
           if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
             ++bad;
             oneSurface = false;
             continue;
           }
+          if (aovs.active()) aovs.add(pixel, ray, terms);
           sum += DVec3(L);
           if (!sp.valid) {
             oneSurface = false;
@@ -368,6 +529,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     for (size_t p = 0; p < indirect.size(); ++p)
       if (borrows[p]) indirect[p] = Vec3(borrowed[p] / double(settings.spp));
     for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
+    result.layers = aovs.layers(settings.spp, &indirect);
     result.stageSeconds["filter"] = stage.seconds();
   }
   result.seconds = timer.seconds();

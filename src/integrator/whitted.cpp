@@ -37,10 +37,17 @@ Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHi
 }
 
 Vec3 WhittedIntegrator::li(const Ray& ray, Sampler& sampler) const {
-  const auto direct = [this](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int) {
-    return estimateDirectLight(m_scene, m_accel, sh, wo, px, m_lightSamples);
+  RadianceTerms unused;
+  return liTerms(ray, sampler, nullptr, unused);
+}
+
+Vec3 WhittedIntegrator::liTerms(const Ray& ray, Sampler& sampler, IndirectSplit*, RadianceTerms& terms) const {
+  const auto direct = [this, &terms](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int, const Vec3& weight) {
+    const Vec3 L = estimateDirectLight(m_scene, m_accel, sh, wo, px, m_lightSamples);
+    terms.direct += weight * L;
+    return L;
   };
-  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, true, direct);
+  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, true, direct, &terms);
 }
 
 }  // namespace voxcone

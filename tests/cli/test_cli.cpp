@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -241,6 +242,35 @@ TEST(Cli, SidecarAndImagesRecordWhatTheImageWasMadeFrom) {
   EXPECT_EQ(png->spec().get_string_attribute("Software"), std::string("voxcone ") + VOXCONE_PROJECT_VERSION);
 }
 
+TEST(Cli, AovLayersAndTypedAttributesAsOiiotoolShowsThem) {
+  const fs::path d = freshDir("cli_aov");
+  const RunResult r = run("render " + test::sourceDir() + "/data/scenes/cornell-box.json -q --res 16x16 --spp 2 " +
+                          "--aov albedo,normal,depth,emitted,direct,indirect,caustic -o " + (d / "img").string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  auto in = OIIO::ImageInput::open((d / "img.exr").string());
+  ASSERT_TRUE(in);
+  std::vector<std::string> names = in->spec().channelnames;
+  std::sort(names.begin(), names.end());
+  const std::vector<std::string> expected = {
+      "Albedo.B", "Albedo.G", "Albedo.R", "B", "Caustic.B", "Caustic.G", "Caustic.R", "Direct.B", "Direct.G",
+      "Direct.R", "Emitted.B", "Emitted.G", "Emitted.R", "G", "Indirect.B", "Indirect.G", "Indirect.R",
+      "Ns.X", "Ns.Y", "Ns.Z", "R", "Z"};
+  EXPECT_EQ(names, expected);
+  std::ifstream f(d / "img.json");
+  EXPECT_EQ(nlohmann::json::parse(f)["aovs"]["depth"], nlohmann::json::array({"Z"}));
+  if (std::system("command -v oiiotool >/dev/null 2>&1") != 0) GTEST_SKIP() << "oiiotool not installed";
+  FILE* p = ::popen(("oiiotool --info -v " + (d / "img.exr").string()).c_str(), "r");
+  std::string info;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) info.append(buf, n);
+  ::pclose(p);
+  // oiiotool quotes strings and prints numbers bare: typed, not JSON text.
+  for (const char* shown : {"22 channel", "Albedo.R", "Ns.X", "Z", "voxcone:method: \"voxcone\"",
+                            "voxcone:settings.spp: 2", "voxcone:settings.width: 16"})
+    EXPECT_NE(info.find(shown), std::string::npos) << shown << " not in:\n" << info;
+}
+
 TEST(Cli, SamplerIsChosenAndRecorded) {
   // --sampler picks the pixel sampler and the sidecar says which; the two give different images
   // of the same scene and seed.
@@ -283,6 +313,8 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --seed -1 -o " + (d / "j").string(),
       "render " + scenes + "cornell-box.json -q --method '' -o " + (d / "k").string(),
       "render " + scenes + "cornell-box.json -q -o ''",
+      "render " + scenes + "cornell-box.json -q --aov albedo,beauty -o " + (d / "q").string(),
+      "render " + scenes + "cornell-box.json -q --method pm --aov direct -o " + (d / "r").string(),
       // Was written as x.tiff.exr, x.tiff.png, x.tiff.json.
       "render " + scenes + "cornell-box.json -q -o " + (d / "p.tiff").string(),
       "info /nonexistent.json",

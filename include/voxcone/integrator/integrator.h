@@ -43,6 +43,17 @@ struct IndirectSplit {
   DeferredGather gather;
 };
 
+/// What a camera sample's radiance is made of (the term AOVs), each term weighted by the
+/// throughput of the delta (mirror, glass) chain that reached it, so that emitted + direct +
+/// caustic + indirect is the sample's radiance. At the first non-delta surface of each chain:
+/// emitted: light sources seen from the camera, directly or through delta bounces (E S* L);
+/// direct: light arriving there straight from a light (E S* D L); caustic: light arriving
+/// there from a light through delta bounces (E S* D S+ L; voxcone: its caustic photons);
+/// indirect: everything else (voxcone: the cones).
+struct RadianceTerms {
+  Vec3 emitted{0.0f}, direct{0.0f}, caustic{0.0f}, indirect{0.0f};
+};
+
 /// Estimates the radiance arriving along camera rays. Implementations are immutable while
 /// rendering (`li` is called concurrently); per-render work happens in `prepare`.
 class Integrator {
@@ -74,6 +85,12 @@ public:
   /// surface): the test behind linkIndirect's links, also used for the samples of pixels the
   /// filter does not take. The default knows of no links.
   virtual bool linkedPoints(const Vec3& from, const Vec3& to) const { return false; }
+  /// Whether liTerms separates this integrator's terms (RadianceTerms).
+  virtual bool separatesTerms() const { return false; }
+  /// li (split null) or liSplit (split given), the same estimate from the same samples, with
+  /// its terms added to `terms` (what liSplit splits off stays out of both). Throws Error
+  /// unless separatesTerms().
+  virtual Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const;
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
   /// Statistics gathered in prepare/li, as JSON.
@@ -99,6 +116,29 @@ std::unique_ptr<Integrator> createIntegrator(const std::string& name, const Inte
 /// The registered names, sorted.
 std::vector<std::string> integratorNames();
 
+/// Layers a render can write beside the beauty image (--aov), pbrt-v4's G-buffer names where
+/// it has them. albedo, normal, depth: the camera ray's first hit, box-filtered like the beauty
+/// (each pixel the mean over its samples; a sample that hits nothing adds 0): Albedo.RGB the
+/// material's diffuse albedo (its specular tint for mirrors, metals and glass, as denoisers
+/// take it), Ns.XYZ the unit shading normal turned to the viewer, world space, Z the distance
+/// along the camera's viewing axis. The terms (RadianceTerms): Emitted, Direct, Caustic,
+/// Indirect, each .RGB; with the indirect filter, Indirect holds the filtered light.
+enum class Aov { Albedo, Normal, Depth, Emitted, Direct, Indirect, Caustic };
+/// The names --aov takes, in Aov order.
+const std::vector<std::string>& aovNames();
+/// A comma-separated list of aovNames() (no repeats), in the order given. Throws SettingsError.
+std::vector<Aov> parseAovs(const std::string& list);
+/// The layer's EXR channel names.
+std::vector<std::string> aovChannels(Aov aov);
+/// Whether the layer is one of the terms (needs Integrator::separatesTerms).
+bool isTermAov(Aov aov);
+
+/// AOVs renderImage computes beside the beauty; `accel` finds the first hits.
+struct AovRequest {
+  std::vector<Aov> layers;
+  const Accel* accel = nullptr;
+};
+
 /// Output of render().
 struct RenderResult {
   Image image;
@@ -112,6 +152,7 @@ struct RenderResult {
   /// deferred gathers ("gathering"; "unfilled": those only because no neighbour gathers), and
   /// the gathers run ("gathers").
   nlohmann::json filterStats = nlohmann::json::object();
+  std::vector<ImageLayer> layers;  ///< the AOVs asked for, in the order asked
   int completedSpp = 0;   ///< samples per pixel in the image (below settings.spp when partial)
   bool partial = false;   ///< interrupted: the image holds the passes that completed
 };
@@ -134,8 +175,11 @@ struct RenderResult {
 /// fraction of a second at any spp, and with `keepPartial` the render then returns the passes
 /// that completed (RenderResult::partial, completedSpp) instead of throwing. Otherwise (and
 /// with the filter, whose samples are one pass) cancellation throws CancelledError.
+/// With `aovs`, each sample is taken through liTerms (the same image) and the layers asked for
+/// are returned in RenderResult::layers; term layers need Integrator::separatesTerms (else
+/// SettingsError).
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                         Progress* progress = nullptr, bool keepPartial = false);
+                         Progress* progress = nullptr, bool keepPartial = false, const AovRequest* aovs = nullptr);
 
 /// Samples of `integrator`'s li at `pixels` (indices y * width + x): `settings.spp` each, drawn
 /// as renderImage draws them (the same sampler, seed and jitter), no indirect filter; their sum

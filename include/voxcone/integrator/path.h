@@ -16,9 +16,17 @@ public:
   explicit PathIntegrator(const IntegratorContext& context);
   std::string name() const override { return "path"; }
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
+  bool separatesTerms() const override { return true; }
+  Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const override;
   nlohmann::json settingsJson() const override;
 
 private:
+  /// li, each contribution also added to its term when `terms` is given (RadianceTerms: by
+  /// the path's vertices, emission before any non-delta vertex is emitted, light reaching the
+  /// first non-delta vertex from a light is direct, or caustic through delta vertices, the
+  /// rest indirect). The same samples and the same sum either way.
+  Vec3 trace(const Ray& ray, Sampler& sampler, RadianceTerms* terms) const;
+
   const Scene& m_scene;
   const Accel& m_accel;
   int m_maxDepth;

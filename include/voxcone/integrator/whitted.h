@@ -14,6 +14,8 @@ public:
   explicit WhittedIntegrator(const IntegratorContext& context);
   std::string name() const override { return "whitted"; }
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
+  bool separatesTerms() const override { return true; }
+  Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const override;
   nlohmann::json settingsJson() const override;
 
 private:

@@ -23,6 +23,8 @@ public:
   const Vec3& target() const { return m_target; }
   const Vec3& up() const { return m_up; }
   float fovYDeg() const { return m_fovYDeg; }
+  /// Unit viewing direction (the depth AOV's axis).
+  const Vec3& forward() const { return m_forward; }
 
 private:
   Vec3 m_position{0.0f}, m_target{0.0f, 0.0f, 1.0f}, m_up{0.0f, 1.0f, 0.0f};

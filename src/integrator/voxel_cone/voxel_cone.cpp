@@ -113,20 +113,32 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
 
 Vec3 VoxelConeIntegrator::gatherDeferred(const DeferredGather& g) const { return gatherDiffuse(g.hit, g.wo, g.u); }
 
-Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler,
-                                 IndirectSplit* split) const {
+Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split,
+                                 RadianceTerms* terms, const Vec3& weight) const {
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in ConeTracer::trace).
   const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kApexLift * voxel); };
-  if (m_settings.view == View::Field)
-    return m_field
-        .coneSample(sh.position, float(m_tracer->finestLevel()), -woWorld, viewFrom(woWorld, m_tracer->finestVoxel()))
-        .radiance;
-  Vec3 L(0.0f);
+  // The parts, summed in this order: direct, then caustic, then indirect.
+  Vec3 direct(0.0f), caustic(0.0f), indirect(0.0f);
+  const auto result = [&] {
+    if (terms) {
+      terms->direct += weight * direct;
+      terms->caustic += weight * caustic;
+      terms->indirect += weight * indirect;
+    }
+    return direct + caustic + indirect;
+  };
+  if (m_settings.view == View::Field) {
+    indirect = m_field
+                   .coneSample(sh.position, float(m_tracer->finestLevel()), -woWorld,
+                               viewFrom(woWorld, m_tracer->finestVoxel()))
+                   .radiance;
+    return result();
+  }
   if (m_settings.view == View::Full || m_settings.view == View::Direct)
-    L += estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples);
-  if (m_settings.view == View::Direct) return L;
+    direct = estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples);
+  if (m_settings.view == View::Direct) return result();
   // Cones on the pixel's first `gathers` samples only, weighted to keep the pixel's mean.
   float gatherWeight = 1.0f;
   const uint32_t gathers = uint32_t(m_settings.gathers);
@@ -138,49 +150,57 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   const Frame frame(sh.shadingNormal);
   const Vec3 wo = frame.toLocal(woWorld);
   if (mat.isDiffuse()) {
-    if (m_settings.view != View::Indirect) L += m_field.causticRadiance(sh.position, viewFrom(ng, m_causticVoxel));
-    if (m_settings.view == View::Caustic) return L;
+    if (m_settings.view != View::Indirect) caustic = m_field.causticRadiance(sh.position, viewFrom(ng, m_causticVoxel));
+    if (m_settings.view == View::Caustic) return result();
     if (split) {
       split->valid = true;
       split->position = sh.position;
       split->normal = ng;
       split->material = sh.material;
     }
-    if (gatherWeight == 0.0f) return L;
+    if (gatherWeight == 0.0f) return result();
     const float u = sampler.uniform();
     // With the filter the cones wait until renderImage knows whether this pixel needs them.
     if (split) {
       split->deferred = true;
       split->gather = {sh, woWorld, u, gatherWeight};
-      return L;
+      return result();
     }
-    return L + gatherWeight * gatherDiffuse(sh, woWorld, u);
+    indirect = gatherWeight * gatherDiffuse(sh, woWorld, u);
+    return result();
   }
-  if (m_settings.view == View::Caustic || gatherWeight == 0.0f) return L;
+  if (m_settings.view == View::Caustic || gatherWeight == 0.0f) return result();
   // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
   BsdfSample bs;
-  if (!bsdfSampleFrom(mat, wo, sampler, bs)) return L;
+  if (!bsdfSampleFrom(mat, wo, sampler, bs)) return result();
   const Vec3 d = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
   // Roughness is in (0, 1]. Below 0.01 the cone would stay one finest voxel wide for over 100
   // steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
-  L += gatherWeight * bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf);
-  return L;
+  indirect = gatherWeight * bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf);
+  return result();
 }
 
-Vec3 VoxelConeIntegrator::trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const {
+Vec3 VoxelConeIntegrator::trace(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms* terms) const {
   if (!m_tracer) throw Error("voxcone: li() before prepare()");
   // Emission is seen directly or through delta bounces (shadow rays sample it elsewhere).
   const bool emission = m_settings.view == View::Full || m_settings.view == View::Direct;
   // Only the camera ray's own first hit is split off for the screen-space filter.
-  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_settings.maxDepth, emission,
-                          [this, split](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int depth) {
-                            return shade(sh, wo, px, depth == 0 ? split : nullptr);
-                          });
+  return traceDeltaChains(
+      m_scene, m_accel, ray, sampler, m_settings.maxDepth, emission,
+      [this, split, terms](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int depth, const Vec3& weight) {
+        return shade(sh, wo, px, depth == 0 ? split : nullptr, terms, weight);
+      },
+      terms);
 }
 
-Vec3 VoxelConeIntegrator::li(const Ray& ray, Sampler& sampler) const { return trace(ray, sampler, nullptr); }
+Vec3 VoxelConeIntegrator::li(const Ray& ray, Sampler& sampler) const { return trace(ray, sampler, nullptr, nullptr); }
+
+Vec3 VoxelConeIntegrator::liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const {
+  if (split) *split = IndirectSplit();
+  return trace(ray, sampler, split, &terms);
+}
 
 void VoxelConeIntegrator::linkIndirect(IndirectBuffer& b) const {
   b.link.assign(b.indirect.size(), 0u);
@@ -213,7 +233,7 @@ bool VoxelConeIntegrator::linkedPoints(const Vec3& from, const Vec3& to) const {
 
 Vec3 VoxelConeIntegrator::liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const {
   split = IndirectSplit();
-  return trace(ray, sampler, &split);
+  return trace(ray, sampler, &split, nullptr);
 }
 
 }  // namespace voxcone

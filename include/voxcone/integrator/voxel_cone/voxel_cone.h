@@ -121,6 +121,8 @@ public:
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
   int indirectFilterRadius() const override { return m_settings.filterRadius; }
   Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
+  bool separatesTerms() const override { return true; }
+  Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const override;
   Vec3 gatherDeferred(const DeferredGather& gather) const override;
   int gatherSpacing() const override { return m_settings.gatherSpacing; }
   /// Adjacent pixels on one surface are linked when an exact ray between their points, a
@@ -135,14 +137,17 @@ private:
   /// The cones' indirect light at a diffuse hit seen from woWorld, the cone set turned by 2 pi u.
   Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const;
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
-  /// hit goes there instead (with the hit's position, normal and material).
-  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split) const;
+  /// hit goes there instead (with the hit's position, normal and material). With `terms`, its
+  /// direct, caustic and indirect parts are added there, times `weight` (the delta chain's).
+  Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split, RadianceTerms* terms,
+             const Vec3& weight) const;
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
   /// The cone tracer over the field just built or read, and the caustic voxel size.
   void startTracer();
-  /// li, with the first hit's indirect light in `split` when it is given.
-  Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split) const;
+  /// li, with the first hit's indirect light in `split` when it is given and the terms in
+  /// `terms` when that is.
+  Vec3 trace(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms* terms) const;
 
   const Scene& m_scene;
   const Accel& m_accel;
