@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes data/scenes/*.json from the numbers of shared/scenes/SPEC.md (run from anywhere).
+"""Writes data/scenes/*.json from the numbers of docs/scenes/SPEC.md (run from anywhere).
 
 The scene files are committed; this script documents where every number comes from and
 regenerates them if the format changes."""
