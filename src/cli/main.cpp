@@ -50,6 +50,7 @@ int main(int argc, char** argv) {
   voxcone::addStudyCommand(app);
   voxcone::addBatchCommand(app);
   voxcone::addGenerateCommand(app);
+  voxcone::addConvertCommand(app);
   voxcone::installInterruptHandler();
   try {
     app.parse(argc, argv);
