@@ -806,6 +806,8 @@ public:
       fail(n, "the sensor's to_world shears or scales unevenly: voxcone's pinhole camera cannot render that");
     if (glm::determinant(glm::dmat3(xf)) < 0.0)
       fail(n, "the sensor's to_world mirrors the image: voxcone's camera is not mirrored");
+    if (maxComponent(glm::abs(origin)) > detail::kMaxSceneReach)
+      fail(n, "the camera lies beyond the range voxcone renders in float");
     Vec3 pos(origin), target, up;
     if (onlyLookat) {
       // Keep lookat's own target and up (the JSON camera's fields: round trips stay exact).

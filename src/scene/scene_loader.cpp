@@ -259,9 +259,9 @@ public:
     m_scene.sourcePath = file;
   }
 
-  /// The float range checks live in scene_build.h (shared with the Mitsuba loader).
+  /// No camera coordinate beyond this (scene_build.h: the float range checks, shared with the
+  /// Mitsuba loader).
   static constexpr double kMaxReach = detail::kMaxSceneReach;
-  void checkPrecision() const { detail::checkScenePrecision(m_scene, m_file); }
 
   Scene build(const json& root) {
     Reader r(root, "", m_file);
