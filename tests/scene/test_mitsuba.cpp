@@ -563,6 +563,20 @@ TEST(MitsubaOneSided, BsdfIsBlackFromBehindUnlessTwoSided) {
   EXPECT_EQ(bsdfDeltaLobes(m, back, lobes), 2);
 }
 
+TEST(MitsubaOneSided, JsonScenesSayItWithTwoSided) {
+  const auto material = [](const std::string& extra) {
+    const Scene s = parseScene(R"({"camera": {"position": [0, 0, -5], "target": [0, 0, 0]},
+        "materials": {"m": {"type": "lambertian", "albedo": 0.5)" + extra + R"(}},
+        "shapes": [{"type": "quad", "material": "m", "vertices": [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]}],
+        "lights": [{"type": "point", "position": [0, 0, -2], "intensity": 1}]})",
+                               "t.json", ".");
+    return s.materials[0];
+  };
+  EXPECT_TRUE(material("").twoSided);  // voxcone's default: both sides
+  EXPECT_FALSE(material(R"(, "two_sided": false)").twoSided);
+  EXPECT_THROW(material(R"(, "two_sided": 1)"), SceneError);
+}
+
 /// A 6 x 6 diffuse quad at z = 0 facing +z, camera and point light both at `side` (+1: in front).
 Scene lonelyQuad(bool twoSided, float side) {
   const std::string quadBsdf = twoSided ? R"(<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.8"/></bsdf></bsdf>)"
