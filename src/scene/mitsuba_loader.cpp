@@ -344,14 +344,16 @@ public:
   }
 
   /// Every element with an id, at any depth (Mitsuba resolves references after parsing).
-  void registerIds(const Node& n) {
+  /// Scenes nest a few levels; a limit keeps hostile input from exhausting the stack.
+  void registerIds(const Node& n, int depth = 0) {
+    if (depth > 32) fail(n, "elements nested more than 32 deep");
     if (n.xml.attribute("id") && n.tag() != "ref") {
       const std::string id = attr(n, "id");
       const auto [it, fresh] = m_ids.emplace(id, n);
       if (!fresh) fail(n, "duplicate id '" + id + "' (first at line " + std::to_string(it->second.file->line(it->second.xml.offset_debug())) + ")");
     }
     for (pugi::xml_node c = n.xml.first_child(); c; c = c.next_sibling())
-      if (c.type() == pugi::node_element) registerIds(Node{c, n.file});
+      if (c.type() == pugi::node_element) registerIds(Node{c, n.file}, depth + 1);
   }
 
   /// A nested plugin or a <ref id=...> to one of tag `tag`.
