@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # AddressSanitizer + UndefinedBehaviorSanitizer (float-cast-overflow included) with clang in
 # build-asan/: the fast tests under them, then each loader's libFuzzer target (PLY, OBJ, scene
-# JSON) for a bounded time from a seed corpus (data/ and tests/fuzz/seeds/). Fails on any report.
+# JSON, Mitsuba XML) for a bounded time from a seed corpus (data/ and tests/fuzz/seeds/). Fails on any report.
 # Writes build-asan/fuzz-summary.txt (executions and coverage per target); a crash input is kept
 # as build-asan/fuzz-<target>/crash-* (make it a regression test).
 #   tools/sanitize.sh [SECONDS_PER_FUZZER]   (default 60)

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -46,6 +47,12 @@ std::map<std::string, std::string> parseDefines(const std::vector<std::string>& 
     if (!out.emplace(name, d.substr(eq + 1)).second) throw SettingsError("-D " + name + " given twice");
   }
   return out;
+}
+
+void addDefineOption(CLI::App& cmd, std::vector<std::string>& defines) {
+  cmd.add_option("-D,--define", defines,
+                 "Mitsuba scene parameter NAME=VALUE: sets $NAME, overriding the scene's <default>; repeatable")
+      ->allow_extra_args(false);
 }
 
 uint64_t parseSeed(const std::string& option, const std::string& text) {

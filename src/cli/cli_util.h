@@ -28,6 +28,9 @@ uint64_t parseSeed(const std::string& option, const std::string& text);
 /// `-D NAME=VALUE` options as Mitsuba scene parameters (scene/mitsuba.h); a value without '=',
 /// an empty or malformed name, or a name given twice is a SettingsError.
 std::map<std::string, std::string> parseDefines(const std::vector<std::string>& defines);
+/// Add the repeatable `-D,--define NAME=VALUE` option to a command that reads a scene; each
+/// -D takes exactly one value, so the scene file after it stays the positional argument.
+void addDefineOption(CLI::App& cmd, std::vector<std::string>& defines);
 
 
 

@@ -20,7 +20,7 @@ void addConvertCommand(CLI::App& app) {
                  "meshes go to binary PLY files in OUT_STEM_meshes/");
   cmd->add_option("scene", o->in, "Scene file (JSON or Mitsuba XML)")->required();
   cmd->add_option("-o,--output", o->out, "Output scene: .xml (Mitsuba 3) or .json (voxcone)")->required()->check(nonEmpty());
-  cmd->add_option("-D,--define", o->defines, "Mitsuba scene parameter NAME=VALUE (overrides its <default>), repeatable");
+  addDefineOption(*cmd, o->defines);
   cmd->callback([o] {
     namespace fs = std::filesystem;
     const std::string ext = fs::path(o->out).extension().string();

@@ -21,7 +21,7 @@ void addInfoCommand(CLI::App& app) {
   auto o = std::make_shared<Opts>();
   CLI::App* cmd = app.add_subcommand("info", "Print scene, mesh and HBVH statistics");
   cmd->add_option("scene", o->scene, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required();
-  cmd->add_option("-D,--define", o->defines, "Mitsuba scene parameter NAME=VALUE (overrides its <default>), repeatable");
+  addDefineOption(*cmd, o->defines);
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   cmd->add_option("-t,--threads", o->threads, "Threads for the HBVH build (0 = all)")->check(CLI::Range(0, 4096));
   cmd->callback([o] {

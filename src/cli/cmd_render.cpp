@@ -273,8 +273,7 @@ void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
   cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml); default: the built-in cornell-box");
-  cmd->add_option("-D,--define", o->defines,
-                  "Mitsuba scene parameter NAME=VALUE: sets $NAME, overriding the scene's <default>; repeatable");
+  addDefineOption(*cmd, o->defines);
   cmd->add_option("-o,--output", o->output, "Output path; .exr/.png/.json are written beside it (default out/<scene>)")
       ->check(nonEmpty());
   cmd->add_option("--method", o->method, "Integrator: " + [] {

@@ -162,7 +162,7 @@ void addVoxelizeCommand(CLI::App& app) {
   auto o = std::make_shared<VoxelizeOptions>();
   CLI::App* cmd = app.add_subcommand("voxelize", "Trace photons, voxelize into OpenVDB grids with mips, write a .vdb");
   cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required();
-  cmd->add_option("-D,--define", o->defines, "Mitsuba scene parameter NAME=VALUE (overrides its <default>), repeatable");
+  addDefineOption(*cmd, o->defines);
   cmd->add_option("--level", o->level, "Finest level: 2^L voxels across the longest axis")->check(CLI::Range(1, 13));
   cmd->add_option("--coarsest-level", o->coarsest, "Coarsest mip level built")->check(CLI::Range(0, 13));
   cmd->add_option("--caustic-level", o->causticLevel,

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <array>
 #include <cctype>
+#include <cfloat>
 #include <cstdlib>
 #include <deque>
 #include <filesystem>
@@ -103,6 +104,9 @@ std::string trim(const std::string& s) {
   return s.substr(a, b - a);
 }
 
+/// Largest absolute component, in double (before any conversion to float).
+double largest(const DVec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); }
+
 /// Numbers separated by commas and/or white space (Mitsuba's lists: "1, 2, 3" or "1 2 3").
 bool parseNumbers(const std::string& text, std::vector<double>& out) {
   out.clear();
@@ -112,7 +116,8 @@ bool parseNumbers(const std::string& text, std::vector<double>& out) {
     if (!*p) break;
     char* end = nullptr;
     const double v = std::strtod(p, &end);
-    if (end == p || !std::isfinite(v)) return false;
+    // Every value ends up in a float: beyond FLT_MAX the conversion is undefined.
+    if (end == p || !std::isfinite(v) || std::abs(v) > double(FLT_MAX)) return false;
     out.push_back(v);
     p = end;
   }
@@ -262,6 +267,12 @@ public:
       for (const char* k : names) ok = ok || std::string(a.name()) == k;
       if (!ok) fail(n, "unknown attribute '" + std::string(a.name()) + "'");
     }
+  }
+
+  /// A transformed point as float; a coordinate beyond float's range is an error.
+  Vec3 toFloat(const Node& n, const DVec3& v) const {
+    if (!(largest(v) <= double(FLT_MAX))) fail(n, "a transformed coordinate is beyond float's range");
+    return Vec3(v);
   }
 
   double number(const Node& n, const std::string& text) const {
@@ -574,7 +585,7 @@ public:
     const bool flip = p.getBool("flip_normals", false);
     std::vector<Vec3> pos, nrm;
     std::vector<UVec3> tris;
-    auto place = [&](const DVec3& v) { return Vec3(DVec3(xf * glm::dvec4(v, 1.0))); };
+    auto place = [&](const DVec3& v) { return toFloat(n, DVec3(xf * glm::dvec4(v, 1.0))); };
     // Analytic shapes (rectangle, disk, sphere): Mitsuba's normal is the transformed local one
     // (inverse transpose), so a mirroring to_world keeps them facing where it says.
     auto orientAnalytic = [&](const DVec3& localNormal) {
@@ -694,7 +705,7 @@ public:
     PointLight pl;
     const glm::dmat4 xf = p.getTransform("to_world");
     if (p.has("position") && p.has("to_world")) fail(n, "give position or to_world, not both");
-    pl.position = p.has("position") ? p.getPoint("position", Vec3(0.0f)) : Vec3(DVec3(xf[3]));
+    pl.position = p.has("position") ? p.getPoint("position", Vec3(0.0f)) : toFloat(n, DVec3(xf[3]));
     pl.intensity = p.getColor("intensity", Vec3(1.0f));
     p.finish();
     m_scene.pointLights.push_back(pl);
@@ -808,7 +819,7 @@ public:
       fail(n, "the sensor's to_world shears or scales unevenly: voxcone's pinhole camera cannot render that");
     if (glm::determinant(glm::dmat3(xf)) < 0.0)
       fail(n, "the sensor's to_world mirrors the image: voxcone's camera is not mirrored");
-    if (maxComponent(glm::abs(origin)) > detail::kMaxSceneReach)
+    if (!(largest(origin) <= detail::kMaxSceneReach))
       fail(n, "the camera lies beyond the range voxcone renders in float");
     Vec3 pos(origin), target, up;
     if (onlyLookat) {

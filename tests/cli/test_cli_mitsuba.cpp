@@ -37,7 +37,8 @@ protected:
 };
 
 TEST_F(MitsubaCli, RenderTakesDefinesThatOverrideDefaults) {
-  const Result r = run("render " + xml() + " -D spp=2 -D res=12 --define max_depth=3 -q -o " + path("img"));
+  // -D before the scene too: each -D takes one value, the scene stays the positional argument.
+  const Result r = run("render -D spp=2 " + xml() + " -D res=12 --define max_depth=3 -q -o " + path("img"));
   ASSERT_EQ(r.code, 0) << r.err;
   std::ifstream f(path("img.json"));
   const nlohmann::json j = nlohmann::json::parse(f);
