@@ -647,7 +647,9 @@ public:
           tris.push_back({b, b + 1, b + 2});
           tris.push_back({b, b + 2, b + 3});
         }
-      // Mitsuba's cube is a mesh: its winding stays, as for obj and ply.
+      // Mitsuba's cube is a mesh: its winding stays, as for obj and ply; its vertex normals are
+      // its faces' (each face has its own vertices), so face_normals changes nothing.
+      p.getBool("face_normals", false);
     } else if (type == "sphere") {
       const Vec3 center = p.getPoint("center", Vec3(0.0f));
       const float radius = p.getFloat("radius", 1.0f, 1e-9f);

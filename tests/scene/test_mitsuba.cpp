@@ -343,8 +343,9 @@ TEST(MitsubaShapes, RectangleCubeDiskSphere) {
   s = parse(xmlScene(R"(<shape type="rectangle"><transform name="to_world"><scale x="-1"/></transform></shape>)"));
   expectVec(triNormal(s, 0), Vec3(0, 0, 1));
 
-  // cube: 24 vertices, 12 triangles, [-1,1]^3, every face outward.
-  s = parse(xmlScene(R"(<shape type="cube"/>)"));
+  // cube: 24 vertices, 12 triangles, [-1,1]^3, every face outward, flat.
+  s = parse(xmlScene(R"(<shape type="cube"><boolean name="face_normals" value="true"/></shape>)"));
+  EXPECT_FALSE(s.shapes[0].smoothNormals);
   EXPECT_EQ(s.positions.size(), 24u);
   EXPECT_EQ(s.triangleCount(), 12u);
   expectVec(s.bounds().lo, Vec3(-1));
