@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # AddressSanitizer + UndefinedBehaviorSanitizer (float-cast-overflow included) with clang in
 # build-asan/: the fast tests under them, then each loader's libFuzzer target (PLY, OBJ, scene
-# JSON) for a bounded time from a seed corpus (data/ and tests/fuzz/seeds/). Fails on any report.
+# JSON, Mitsuba XML) for a bounded time from a seed corpus (data/ and tests/fuzz/seeds/). Fails on any report.
 # Writes build-asan/fuzz-summary.txt (executions and coverage per target); a crash input is kept
 # as build-asan/fuzz-<target>/crash-* (make it a regression test).
 #   tools/sanitize.sh [SECONDS_PER_FUZZER]   (default 60)
@@ -27,7 +27,7 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 summary=build-asan/fuzz-summary.txt
 : >"$summary"
 status=0
-for target in ply obj scene; do
+for target in ply obj scene mitsuba; do
   corpus=build-asan/fuzz-$target
   rm -rf "$corpus" && mkdir -p "$corpus"
   cp tests/fuzz/seeds/$target/* "$corpus"/
@@ -35,6 +35,7 @@ for target in ply obj scene; do
     ply) cp data/meshes/*.ply "$corpus"/; ./build-asan/voxcone generate-mesh --triangles 64 -o "$corpus/generated.ply" >/dev/null ;;
     obj) cp data/meshes/*.obj "$corpus"/; { cat data/meshes/cube.obj; printf '\0'; cat data/meshes/cube.mtl; } >"$corpus/cube-with-mtl.obj" ;;
     scene) cp data/scenes/*.json "$corpus"/ ;;
+    mitsuba) cp data/scenes/*.xml "$corpus"/ ;;
   esac
   log=build-asan/fuzz-$target.log
   if ! (cd "$corpus" && ../fuzz_$target -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \

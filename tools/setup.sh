@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 
 PACKAGES=(build-essential cmake ninja-build pkg-config git
   libopenvdb-dev libopenvdb-tools libboost-iostreams-dev libopenimageio-dev libglm-dev libtbb-dev
-  libtinyobjloader-dev libcli11-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev libxxhash-dev)
+  libtinyobjloader-dev libcli11-dev nlohmann-json3-dev libpugixml-dev libgtest-dev libbenchmark-dev libxxhash-dev)
 
 install_deps() {
   local missing=()

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
@@ -34,6 +35,26 @@ const CLI::Validator& positiveNumber() {
       },
       "POSITIVE");
   return v;
+}
+
+std::map<std::string, std::string> parseDefines(const std::vector<std::string>& defines) {
+  std::map<std::string, std::string> out;
+  for (const std::string& d : defines) {
+    const size_t eq = d.find('=');
+    const std::string name = d.substr(0, eq);
+    bool ok = eq != std::string::npos && !name.empty();
+    for (char c : name) ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '_');
+    if (!ok) throw SettingsError("-D expects NAME=VALUE (NAME of letters, digits and _), got '" + d + "'");
+    if (!out.emplace(name, d.substr(eq + 1)).second) throw SettingsError("-D " + name + " given twice");
+  }
+  return out;
+}
+
+void addDefineOption(CLI::App& cmd, std::vector<std::string>& defines) {
+  cmd.add_option("-D,--define", defines,
+                 "Mitsuba scene parameter NAME=VALUE: sets $NAME, overriding the scene's <default>; repeatable")
+      ->allow_extra_args(false)
+      ->default_str("none");
 }
 
 uint64_t parseSeed(const std::string& option, const std::string& text) {

@@ -9,7 +9,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
-
+#include <map>
 #include <string>
 #include <vector>
 
@@ -24,6 +24,13 @@ const CLI::Validator& positiveNumber();
 /// A seed: a decimal integer in [0, 2^64 - 1]; anything else (a sign, a fraction, more than 64
 /// bits) is a SettingsError naming `option`, never clamped.
 uint64_t parseSeed(const std::string& option, const std::string& text);
+
+/// `-D NAME=VALUE` options as Mitsuba scene parameters (scene/mitsuba.h); a value without '=',
+/// an empty or malformed name, or a name given twice is a SettingsError.
+std::map<std::string, std::string> parseDefines(const std::vector<std::string>& defines);
+/// Add the repeatable `-D,--define NAME=VALUE` option to a command that reads a scene; each
+/// -D takes exactly one value, so the scene file after it stays the positional argument.
+void addDefineOption(CLI::App& cmd, std::vector<std::string>& defines);
 
 
 

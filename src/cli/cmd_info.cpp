@@ -1,5 +1,6 @@
 // `voxcone info SCENE`: mesh and HBVH statistics.
 
+#include "cli_util.h"
 #include "commands.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/parallel.h"
@@ -13,19 +14,20 @@ namespace voxcone {
 void addInfoCommand(CLI::App& app) {
   struct Opts {
     std::string scene;
+    std::vector<std::string> defines;
     bool json = false;
     int threads = 0;
   };
   auto o = std::make_shared<Opts>();
   CLI::App* cmd = app.add_subcommand("info", "Print scene, mesh and HBVH statistics");
-  cmd->add_option("scene", o->scene, "Scene file (JSON)")->required()
-      ->default_str("");
+  cmd->add_option("scene", o->scene, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required()->default_str("");
+  addDefineOption(*cmd, o->defines);
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   cmd->add_option("-t,--threads", o->threads, "Threads for the HBVH build (0 = all)")->check(CLI::Range(0, 4096));
   cmd->callback([o] {
     ThreadLimit limit(o->threads);
     Timer t;
-    const Scene scene = loadScene(o->scene);
+    const Scene scene = loadScene(o->scene, parseDefines(o->defines));
     const double loadSec = t.seconds();
     const Hbvh accel(scene);
     nlohmann::json j;

@@ -49,6 +49,7 @@ struct RenderOptions {
   bool writePartial = false;      // --write-partial: an interrupted render writes its complete passes
   std::string aovs;               // --aov: layers beside the beauty (integrator.h Aov)
   bool quiet = false;
+  std::vector<std::string> defines;  // -D NAME=VALUE: Mitsuba scene parameters
 };
 
 void parseResolution(const std::string& s, RenderSettings& settings) {
@@ -84,8 +85,10 @@ void runRender(const RenderOptions& o) {
   Timer t;
   const std::string sceneName =
       o.scenePath.empty() ? std::string(kDefaultSceneName) : std::filesystem::path(o.scenePath).stem().string();
+  if (o.scenePath.empty() && !o.defines.empty())
+    throw SettingsError("-D sets parameters of a Mitsuba XML scene; none is given");
   const Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
-                                          : loadScene(o.scenePath);
+                                          : loadScene(o.scenePath, parseDefines(o.defines));
   const double loadSec = t.seconds();
   // What the image was made from, hashed as it was read (xxhsum -H2 checks a file against it).
   nlohmann::json inputs = nlohmann::json::array();
@@ -310,7 +313,8 @@ void runRender(const RenderOptions& o) {
 void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML)")->default_str("the built-in cornell-box");
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->default_str("the built-in cornell-box");
+  addDefineOption(*cmd, o->defines);
   cmd->add_option("-o,--output", o->output, "Output stem (or STEM.exr/.png/.json): STEM.exr, STEM.png and STEM.json are written; any other extension is an error")
       ->check(nonEmpty())
       ->default_str("out/<scene>");

@@ -1,6 +1,7 @@
 // `voxcone voxelize SCENE --level L`: trace photons, voxelize, inject, build the mips, print a
 // table per grid and level, and write every grid into one .vdb file.
 
+#include "cli_util.h"
 #include "commands.h"
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/error.h"
@@ -21,6 +22,7 @@ namespace {
 
 struct VoxelizeOptions {
   std::string scenePath;
+  std::vector<std::string> defines;  // -D NAME=VALUE: Mitsuba scene parameters
   std::string output;
   int level = 8;
   int coarsest = 2;
@@ -46,7 +48,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   // The peak resident set after each stage (the process's high-water mark so far).
   nlohmann::json peakAfter;
   Timer t;
-  const Scene scene = loadScene(o.scenePath);
+  const Scene scene = loadScene(o.scenePath, parseDefines(o.defines));
   const double loadSec = t.seconds();
   peakAfter["load"] = peakRssBytes();
   t.reset();
@@ -159,7 +161,8 @@ void runVoxelize(const VoxelizeOptions& o) {
 void addVoxelizeCommand(CLI::App& app) {
   auto o = std::make_shared<VoxelizeOptions>();
   CLI::App* cmd = app.add_subcommand("voxelize", "Trace photons, voxelize into OpenVDB grids with mips, write a .vdb");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON)")->required();
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required();
+  addDefineOption(*cmd, o->defines);
   cmd->add_option("--level", o->level, "Finest level: 2^L voxels across the longest axis")->check(CLI::Range(1, 13));
   cmd->add_option("--coarsest-level", o->coarsest, "Coarsest mip level built")->check(CLI::Range(0, 13));
   cmd->add_option("--caustic-level", o->causticLevel,

@@ -55,6 +55,7 @@ int main(int argc, char** argv) {
   voxcone::addStudyCommand(app);
   voxcone::addBatchCommand(app);
   voxcone::addGenerateCommand(app);
+  voxcone::addConvertCommand(app);
   voxcone::installInterruptHandler();
   voxcone::setCommandLine(argc, argv);
   try {

@@ -73,6 +73,9 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
     // Store at diffuse hits only (Lambertian, Oren-Nayar): the voxel field gathers diffuse
     // radiance, and glossy lobes are not view-independent, so a glossy hit stores nothing.
     if (mat.isDiffuse()) {
+      // A one-sided surface hit from behind reflects nothing: no photon, and the path ends
+      // there (bsdfSample fails below), so its back never lights the field.
+      if (mat.blackFrom(glm::dot(sh.shadingNormal, woWorld))) return;
       const bool caustic = specularOnly && segment > 1;
       if (pass == Pass::Global ? !caustic : caustic) {
         Photon ph;

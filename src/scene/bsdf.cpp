@@ -266,6 +266,8 @@ Vec3 fresnelConductor(float cosThetaI, const Vec3& eta, const Vec3& k) {
 
 Vec3 bsdfEval(const Material& m, const Vec3& wo, const Vec3& wi, TransportMode mode) {
   if (!validDir(wo) || !validDir(wi)) return Vec3(0.0f);
+  // One-sided reflectors (Mitsuba's BSDFs without `twosided`): nothing below the normal.
+  if (m.blackFrom(wo.z) || m.blackFrom(wi.z)) return Vec3(0.0f);
   Vec3 f(0.0f);
   switch (m.type) {
     case MaterialType::Mirror:
@@ -289,6 +291,7 @@ Vec3 bsdfEval(const Material& m, const Vec3& wo, const Vec3& wi, TransportMode m
 
 float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
   if (!validDir(wo) || !validDir(wi)) return 0.0f;
+  if (m.blackFrom(wo.z) || m.blackFrom(wi.z)) return 0.0f;
   float pdf = 0.0f;
   switch (m.type) {
     case MaterialType::Mirror:
@@ -310,7 +313,7 @@ float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
 
 bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, BsdfSample& out, TransportMode mode) {
   out = BsdfSample{};
-  if (!validDir(wo)) return false;
+  if (!validDir(wo) || m.blackFrom(wo.z)) return false;
   const bool flip = wo.z < 0.0f;
   switch (m.type) {
     case MaterialType::Lambertian:
@@ -393,7 +396,7 @@ bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, Bsdf
 }
 
 int bsdfDeltaLobes(const Material& m, const Vec3& wo, DeltaLobe out[2], TransportMode mode) {
-  if (!validDir(wo)) return 0;
+  if (!validDir(wo) || m.blackFrom(wo.z)) return 0;
   const Vec3 wr(-wo.x, -wo.y, wo.z);
   switch (m.type) {
     case MaterialType::Mirror:

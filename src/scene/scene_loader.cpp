@@ -3,7 +3,9 @@
 
 #include "voxcone/core/error.h"
 #include "voxcone/scene/mesh.h"
+#include "voxcone/scene/mitsuba.h"
 #include "voxcone/scene/scene.h"
+#include "scene_build.h"
 
 #include <nlohmann/json.hpp>
 
@@ -175,6 +177,7 @@ Material parseMaterial(Reader& r, const std::string& name) {
   }
   m.emission = r.rgb("emission", Vec3(0.0f));
   m.twoSidedEmission = r.boolean("two_sided_emission", false);
+  m.twoSided = r.boolean("two_sided", true);
   r.finish();
   return m;
 }
@@ -203,7 +206,10 @@ glm::mat4 parseTransform(Reader& r) {
   return m;
 }
 
-/// A geodesic sphere: icosahedron subdivided `level` times, projected to the sphere.
+}  // namespace
+
+namespace detail {
+
 void makeSphere(const Vec3& center, float radius, int level, bool inward, std::vector<Vec3>& pos, std::vector<UVec3>& tris) {
   const float t = (1.0f + std::sqrt(5.0f)) / 2.0f;
   std::vector<Vec3> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
@@ -241,41 +247,21 @@ void makeSphere(const Vec3& center, float radius, int level, bool inward, std::v
   }
 }
 
+}  // namespace detail
+
+namespace {
+
+using detail::makeSphere;
+
 class SceneBuilder {
 public:
   SceneBuilder(const std::string& file, const std::string& baseDir) : m_file(file), m_baseDir(baseDir) {
     m_scene.sourcePath = file;
   }
 
-  /// The range voxcone renders correctly in float, measured on cornell-box scaled and moved
-  /// (the same image mean to 4 digits from 1e-6 to 5e6 times its size, and moved up to 180
-  /// times its size from the origin): a scene is refused when its largest side lies outside
-  /// [kMinExtent, kMaxExtent] or a coordinate is more than kMaxOffset sides from the origin.
-  /// Beyond them it was wrong, not slow: scaled 1e7 the image mean was 0.07 instead of 0.12,
-  /// 1e8 black; 1e-8 1.4% off; moved 1800 sides away 1.1% off, 18,000 sides -13%.
-  static constexpr double kMinExtent = 1e-4, kMaxExtent = 1e9, kMaxOffset = 256.0;
-  /// No coordinate (camera included) beyond this: kMaxExtent and kMaxOffset allow less anyway.
-  static constexpr double kMaxReach = 1e12;
-  void checkPrecision() const {
-    const Bounds3& b = m_scene.bounds();
-    const DVec3 lo(b.lo), hi(b.hi);
-    const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-    const double reach = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x), std::abs(hi.y),
-                                   std::abs(hi.z)});
-    std::ostringstream os;
-    os.precision(3);
-    if (!(extent >= kMinExtent && extent <= kMaxExtent)) {
-      os << "the scene is " << extent << " units across: voxcone renders scenes between " << kMinExtent << " and "
-         << kMaxExtent << " across correctly in float (scale it)";
-      throw SceneError(m_file, "shapes", os.str());
-    }
-    if (reach > kMaxOffset * extent) {
-      os << "the scene reaches " << reach << " from the origin but is " << extent
-         << " across: beyond " << kMaxOffset << " times its size float positions lose the detail it needs (move it "
-         << "near the origin)";
-      throw SceneError(m_file, "shapes", os.str());
-    }
-  }
+  /// No camera coordinate beyond this (scene_build.h: the float range checks, shared with the
+  /// Mitsuba loader).
+  static constexpr double kMaxReach = detail::kMaxSceneReach;
 
   Scene build(const json& root) {
     Reader r(root, "", m_file);
@@ -292,10 +278,7 @@ public:
       for (size_t i = 0; i < lights.size(); ++i) parseLight(lights[i], "lights[" + std::to_string(i) + "]");
     }
     r.finish();
-    if (m_scene.triangles.empty()) throw SceneError(m_file, "shapes", "the scene has no triangles");
-    m_scene.finalize();
-    checkPrecision();
-    if (!m_scene.hasLights()) throw SceneError(m_file, "", "the scene has no light (no emissive surface, no point light)");
+    detail::finishScene(m_scene, m_file);
     return std::move(m_scene);
   }
 
@@ -485,6 +468,38 @@ private:
 
 }  // namespace
 
+namespace detail {
+
+void checkScenePrecision(const Scene& scene, const std::string& file) {
+  const Bounds3& b = scene.bounds();
+  const DVec3 lo(b.lo), hi(b.hi);
+  const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  const double reach = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x), std::abs(hi.y),
+                                 std::abs(hi.z)});
+  std::ostringstream os;
+  os.precision(3);
+  if (!(extent >= kMinSceneExtent && extent <= kMaxSceneExtent)) {
+    os << "the scene is " << extent << " units across: voxcone renders scenes between " << kMinSceneExtent << " and "
+       << kMaxSceneExtent << " across correctly in float (scale it)";
+    throw SceneError(file, "shapes", os.str());
+  }
+  if (reach > kMaxSceneOffset * extent) {
+    os << "the scene reaches " << reach << " from the origin but is " << extent
+       << " across: beyond " << kMaxSceneOffset << " times its size float positions lose the detail it needs (move it "
+       << "near the origin)";
+    throw SceneError(file, "shapes", os.str());
+  }
+}
+
+void finishScene(Scene& scene, const std::string& file) {
+  if (scene.triangles.empty()) throw SceneError(file, "shapes", "the scene has no triangles");
+  scene.finalize();
+  checkScenePrecision(scene, file);
+  if (!scene.hasLights()) throw SceneError(file, "", "the scene has no light (no emissive surface, no point light)");
+}
+
+}  // namespace detail
+
 Scene parseScene(const std::string& jsonText, const std::string& origin, const std::string& baseDir) {
   json root;
   try {
@@ -512,7 +527,12 @@ Scene parseScene(const std::string& jsonText, const std::string& origin, const s
   return SceneBuilder(origin, baseDir).build(root);
 }
 
-Scene loadScene(const std::string& path) {
+Scene loadScene(const std::string& path) { return loadScene(path, {}); }
+
+Scene loadScene(const std::string& path, const std::map<std::string, std::string>& parameters) {
+  if (isMitsubaScenePath(path)) return loadMitsubaScene(path, parameters);
+  if (!parameters.empty())
+    throw SceneError(path, "", "-D " + parameters.begin()->first + "=...: parameters apply to Mitsuba XML scenes only");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, "", "cannot open scene file");
   std::ostringstream ss;

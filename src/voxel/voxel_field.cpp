@@ -1083,7 +1083,8 @@ uint64_t fieldSceneHash(const Scene& scene) {
   bytes(scene.triangles.data(), scene.triangles.size() * sizeof(UVec3));
   bytes(scene.triMaterial.data(), scene.triMaterial.size() * sizeof(uint32_t));
   for (const Material& m : scene.materials) {
-    const int32_t kinds[3] = {int32_t(m.type), int32_t(m.distribution), int32_t(m.twoSidedEmission)};
+    // twoSided too: a one-sided surface stores no photons on its back.
+    const int32_t kinds[4] = {int32_t(m.type), int32_t(m.distribution), int32_t(m.twoSidedEmission), int32_t(m.twoSided)};
     bytes(kinds, sizeof kinds);
     floats({m.albedo.x, m.albedo.y, m.albedo.z, m.sigmaRad, m.specular.x, m.specular.y, m.specular.z, m.ior, m.eta.x,
             m.eta.y, m.eta.z, m.k.x, m.k.y, m.k.z, m.roughness, m.emission.x, m.emission.y, m.emission.z});

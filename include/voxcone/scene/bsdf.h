@@ -5,8 +5,10 @@
 /// Conventions (all functions): directions are unit vectors in the local shading frame, z is
 /// the shading normal, both `wo` (towards the viewer / previous vertex) and `wi` (towards the
 /// light / next vertex) point away from the surface.
-/// - Non-transmissive materials are two-sided: if wo.z < 0 the lobe is mirrored to the -z
-///   side (as if the normal were flipped); reflection needs wo.z * wi.z > 0.
+/// - Non-transmissive materials are two-sided by default: if wo.z < 0 the lobe is mirrored to
+///   the -z side (as if the normal were flipped); reflection needs wo.z * wi.z > 0. A material
+///   with twoSided = false (Mitsuba's convention) scatters only when wo.z > 0 and wi.z > 0:
+///   eval and pdf are 0, sample fails and no delta lobe exists otherwise.
 /// - Transmissive materials: +z is the outside, `ior` is inside over outside; wo.z < 0 means
 ///   the path arrives from inside.
 /// - Values returned by bsdfEval are f(wo, wi) WITHOUT the cosine factor.

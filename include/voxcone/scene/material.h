@@ -41,6 +41,12 @@ struct Material {
   MicrofacetDistribution distribution = MicrofacetDistribution::GGX;
   Vec3 emission{0.0f};        ///< emitted radiance on the front (+geometric normal) side
   bool twoSidedEmission = false;
+  /// Whether a non-transmissive material reflects on both sides (voxcone's default). When
+  /// false it reflects only on the front side, as Mitsuba's BSDFs do outside `twosided`: no
+  /// reflection when wo or wi lies below the shading normal, which SurfaceHit orients to the
+  /// geometric normal's side (the same side for flat shading). Transmissive materials
+  /// (dielectrics) ignore it: both sides are part of their model.
+  bool twoSided = true;
 
   bool isEmissive() const { return !isBlack(emission); }
   /// True when every lobe is a Dirac delta (no BSDF evaluation, no light sampling).
@@ -53,6 +59,9 @@ struct Material {
   }
   /// True for the diffuse models (the voxel field stores their radiance).
   bool isDiffuse() const { return type == MaterialType::Lambertian || type == MaterialType::OrenNayar; }
+  /// True when the material scatters nothing seen from direction `cosFront` (the cosine of the
+  /// direction with the shading normal, oriented as SurfaceHit's): a one-sided reflector from behind.
+  bool blackFrom(float cosFront) const { return !twoSided && !isTransmissive() && !(cosFront > 0.0f); }
 };
 
 }  // namespace voxcone

@@ -12,6 +12,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -141,9 +142,13 @@ private:
   float m_totalPower = 0.0f;
 };
 
-/// Load a scene from a JSON file (see README "Scene format"). Relative mesh paths are resolved
-/// against the scene file's folder. Throws SceneError naming the file and JSON path.
+/// Load a scene: a Mitsuba 3 XML file when `path` ends in .xml (any case; scene/mitsuba.h),
+/// else voxcone JSON (see README "Scene format"). Relative mesh paths are resolved against the
+/// scene file's folder. Throws SceneError naming the file and the JSON path or XML line.
 Scene loadScene(const std::string& path);
+/// loadScene with `-D name=value` parameters for a Mitsuba scene (they override its
+/// `<default>` values); a JSON scene with any parameter is a SceneError.
+Scene loadScene(const std::string& path, const std::map<std::string, std::string>& parameters);
 
 /// Parse a scene from JSON text; `origin` names it in errors; `baseDir` resolves mesh paths.
 Scene parseScene(const std::string& jsonText, const std::string& origin, const std::string& baseDir);

@@ -149,6 +149,8 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   const Vec3 ng = front ? sh.geomNormal : -sh.geomNormal;
   const Frame frame(sh.shadingNormal);
   const Vec3 wo = frame.toLocal(woWorld);
+  // A one-sided surface seen from behind: no caustics, no cones (its direct light is 0 too).
+  if (mat.blackFrom(wo.z)) return result();
   if (mat.isDiffuse()) {
     if (m_settings.view != View::Indirect) caustic = m_field.causticRadiance(sh.position, viewFrom(ng, m_causticVoxel));
     if (m_settings.view == View::Caustic) return result();
