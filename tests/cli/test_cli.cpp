@@ -240,6 +240,16 @@ TEST(Cli, SidecarAndImagesRecordWhatTheImageWasMadeFrom) {
   ASSERT_TRUE(png);
   EXPECT_EQ(png->spec().get_string_attribute("voxcone:settings.seed"), "3");
   EXPECT_EQ(png->spec().get_string_attribute("Software"), std::string("voxcone ") + VOXCONE_PROJECT_VERSION);
+  // A Mitsuba scene: its XML and each OBJ it loads.
+  const RunResult x = run("render " + test::sourceDir() + "/data/scenes/cornell-box.xml -q --res 8x8 --spp 1 -o " +
+                          (d / "xml").string());
+  ASSERT_EQ(x.code, 0) << x.err;
+  std::ifstream fx(d / "xml.json");
+  const nlohmann::json jx = nlohmann::json::parse(fx);
+  ASSERT_EQ(jx["inputs"].size(), 8u) << jx["inputs"];
+  EXPECT_EQ(jx["inputs"][0]["role"], "scene");
+  EXPECT_EQ(jx["inputs"][1]["role"], "mesh");
+  EXPECT_EQ(jx["inputs"][1]["xxh128"], wholeFileXxh128(jx["inputs"][1]["path"].get<std::string>()));
 }
 
 TEST(Cli, AovLayersAndTypedAttributesAsOiiotoolShowsThem) {
