@@ -479,7 +479,8 @@ int run(const Options& opt) {
                           {"max_leaf_size", opt.hbvh.maxLeafSize},
                           {"sphere_area_ratio", opt.hbvh.sphereAreaRatio},
                           {"traversal_cost", opt.hbvh.traversalCost},
-                          {"intersection_cost", opt.hbvh.intersectionCost}};
+                          {"intersection_cost", opt.hbvh.intersectionCost},
+                          {"leaf_test_width", opt.hbvh.leafTestWidth}};
     j["hbvh_stats"] = hs.toJson();
     for (const BuildResult& b : builds)
       j["builds"].push_back({{"name", b.name},
@@ -528,6 +529,7 @@ int main(int argc, char** argv) {
   app.add_option("--bins", opt.hbvh.binCount, "HbvhBuildSettings::binCount")->check(CLI::Range(2, 256));
   app.add_option("--traversal-cost", opt.hbvh.traversalCost, "HbvhBuildSettings::traversalCost")
       ->check(CLI::PositiveNumber);
+  app.add_option("--leaf-test-width", opt.hbvh.leafTestWidth, "HbvhBuildSettings::leafTestWidth")->check(CLI::IsMember({4, 8}));
   app.add_option("--intersection-cost", opt.hbvh.intersectionCost, "HbvhBuildSettings::intersectionCost")
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");

@@ -225,8 +225,8 @@ private:
     return std::min(glm::length(child.box.center() - c) + child.reach, glm::length(far));
   }
 
-  /// Number of 4-triangle packets holding n triangles.
-  static uint32_t packets(uint32_t n) { return (n + 3u) / 4u; }
+  /// Leaf tests of n triangles (HbvhBuildSettings::leafTestWidth at a time).
+  uint32_t packets(uint32_t n) const { return (n + uint32_t(m_s.leafTestWidth) - 1u) / uint32_t(m_s.leafTestWidth); }
 
   /// Bin refs[begin, end) on all three axes into `bins` (SSE: one bin index per axis at once).
   void binRange(uint32_t begin, uint32_t end, const BinMap& map, Bins& bins) const {
@@ -575,6 +575,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
   static_assert((kLeafBit >> kCountShift) == 64, "packet counts 1..64 must fit between the leaf bit and the slot");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
+  if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
   Builder builder(s, positions, triangles, progress);
