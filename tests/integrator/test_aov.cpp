@@ -146,6 +146,15 @@ TEST(Aov, TermsAddUpToTheBeautyAndAskingForThemChangesNothing) {
     }
 }
 
+/// Per pixel and channel: the emitted and direct layers of `full` sum to `image` (a render
+/// that computes those two terms alone from the same random numbers).
+void expectEmittedPlusDirectIs(const RenderResult& full, const Image& image) {
+  const ImageLayer &e = layer(full, "emitted"), &d = layer(full, "direct");
+  for (size_t p = 0; p < image.pixels.size(); ++p)
+    for (size_t k = 0; k < 3; ++k)
+      EXPECT_NEAR(at(e, p, k) + at(d, p, k), image.pixels[p][int(k)], 1e-5f * (1.0f + image.pixels[p][int(k)])) << p;
+}
+
 TEST(Aov, PathEmittedPlusDirectIsThePathOfTwoSegments) {
   // In the cornell-box (no delta surface) emitted + direct is every path of at most two
   // segments, E L and E D L: path at max_depth 2 computes exactly that with the same random
@@ -157,11 +166,7 @@ TEST(Aov, PathEmittedPlusDirectIsThePathOfTwoSegments) {
   const RenderResult full = renderAovs(scene, "path", s);
   s.maxDepth = 2;
   const RenderResult two = test::renderWith(scene, "path", s);
-  const ImageLayer &e = layer(full, "emitted"), &d = layer(full, "direct");
-  for (size_t p = 0; p < two.image.pixels.size(); ++p)
-    for (size_t k = 0; k < 3; ++k)
-      EXPECT_NEAR(at(e, p, k) + at(d, p, k), two.image.pixels[p][int(k)], 1e-5f * (1.0f + two.image.pixels[p][int(k)]))
-          << p;
+  expectEmittedPlusDirectIs(full, two.image);
 }
 
 TEST(Aov, VoxconeEmittedPlusDirectIsItsDirectView) {
@@ -173,12 +178,7 @@ TEST(Aov, VoxconeEmittedPlusDirectIsItsDirectView) {
   s.spp = 8;
   const RenderResult full = renderAovs(scene, "voxcone", s);
   const RenderResult direct = test::renderWith(scene, "voxcone", s, {{"view", "direct"}});
-  const ImageLayer &e = layer(full, "emitted"), &d = layer(full, "direct");
-  for (size_t p = 0; p < direct.image.pixels.size(); ++p)
-    for (size_t k = 0; k < 3; ++k)
-      EXPECT_NEAR(at(e, p, k) + at(d, p, k), direct.image.pixels[p][int(k)],
-                  1e-5f * (1.0f + direct.image.pixels[p][int(k)]))
-          << p;
+  expectEmittedPlusDirectIs(full, direct.image);
 }
 
 TEST(Aov, TermLayersNeedAMethodThatSeparatesThem) {
