@@ -204,11 +204,7 @@ void runRender(const RenderOptions& o) {
     IntegratorContext ctx{scene, *accel, settings, options};
     integrator = createIntegrator(settings.method, ctx);
     // Term layers need an integrator that separates them: known before anything is traced.
-    if (!integrator->separatesTerms())
-      for (Aov a : aovs.layers)
-        if (isTermAov(a))
-          throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + settings.method +
-                              " does not separate its terms (path, whitted and voxcone do)");
+    checkAovs(*integrator, aovs.layers);
     t.reset();
     integrator->prepare(&progress);
     prepareSec = t.seconds();

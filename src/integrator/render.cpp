@@ -348,17 +348,21 @@ std::vector<std::string> aovChannels(Aov aov) {
 
 bool isTermAov(Aov aov) { return aov != Aov::Albedo && aov != Aov::Normal && aov != Aov::Depth; }
 
+void checkAovs(const Integrator& integrator, const std::vector<Aov>& layers) {
+  if (integrator.separatesTerms()) return;
+  for (Aov a : layers)
+    if (isTermAov(a))
+      throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + integrator.name() +
+                          " does not separate its terms (path, whitted and voxcone do)");
+}
+
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                          Progress* progress, bool keepPartial, const AovRequest* aovRequest) {
   settings.validate();
   if (aovRequest && aovRequest->layers.empty()) aovRequest = nullptr;
   if (aovRequest) {
     if (!aovRequest->accel) throw Error("renderImage: AOVs without an accelerator");
-    if (!integrator.separatesTerms())
-      for (Aov a : aovRequest->layers)
-        if (isTermAov(a))
-          throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + integrator.name() +
-                              " does not separate its terms (path, whitted and voxcone do)");
+    checkAovs(integrator, aovRequest->layers);
   }
   const int filterRadius = integrator.indirectFilterRadius();
   const bool split = filterRadius > 0;

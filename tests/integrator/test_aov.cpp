@@ -42,6 +42,14 @@ const ImageLayer& layer(const RenderResult& r, const std::string& name) {
 /// A layer's value at pixel p, channel c.
 float at(const ImageLayer& l, size_t p, size_t c) { return l.values[p * l.channels.size() + c]; }
 
+/// cornell-box's settings at `size` x `size` pixels and `spp` samples.
+RenderSettings smallSettings(const Scene& scene, int size, int spp) {
+  RenderSettings s = scene.render;
+  s.width = s.height = size;
+  s.spp = spp;
+  return s;
+}
+
 /// The cornell-box with a glass sphere (IOR 1.5) on the floor: light reaches the floor
 /// through it (caustic), the camera sees the light through it (emitted via delta bounces).
 Scene cornellWithGlassBall(int width, int spp) {
@@ -126,9 +134,7 @@ double layerMean(const ImageLayer& l) {
 TEST(Aov, TermsAddUpToTheBeautyAndAskingForThemChangesNothing) {
   const Scene plain = test::cornellBox();
   const Scene glass = cornellWithGlassBall(24, 8);
-  RenderSettings s = plain.render;
-  s.width = s.height = 24;
-  s.spp = 8;
+  const RenderSettings s = smallSettings(plain, 24, 8);
   for (const Scene* scene : {&plain, &glass})
     for (const char* method : {"path", "whitted", "voxcone"}) {
       const std::string what = scene->sourcePath + " " + method;
@@ -160,9 +166,7 @@ TEST(Aov, PathEmittedPlusDirectIsThePathOfTwoSegments) {
   // segments, E L and E D L: path at max_depth 2 computes exactly that with the same random
   // numbers (roulette starts at depth 3), so the layers must equal its image.
   const Scene scene = test::cornellBox();
-  RenderSettings s = scene.render;
-  s.width = s.height = 24;
-  s.spp = 8;
+  RenderSettings s = smallSettings(scene, 24, 8);
   const RenderResult full = renderAovs(scene, "path", s);
   s.maxDepth = 2;
   const RenderResult two = test::renderWith(scene, "path", s);
@@ -173,9 +177,7 @@ TEST(Aov, VoxconeEmittedPlusDirectIsItsDirectView) {
   // voxcone's view "direct" renders emission and direct light alone, drawing the same random
   // numbers for them: its image is the full render's emitted + direct layers.
   const Scene scene = test::cornellBox();
-  RenderSettings s = scene.render;
-  s.width = s.height = 24;
-  s.spp = 8;
+  RenderSettings s = smallSettings(scene, 24, 8);
   const RenderResult full = renderAovs(scene, "voxcone", s);
   const RenderResult direct = test::renderWith(scene, "voxcone", s, {{"view", "direct"}});
   expectEmittedPlusDirectIs(full, direct.image);
@@ -183,9 +185,7 @@ TEST(Aov, VoxconeEmittedPlusDirectIsItsDirectView) {
 
 TEST(Aov, TermLayersNeedAMethodThatSeparatesThem) {
   const Scene scene = test::cornellBox();
-  RenderSettings s = scene.render;
-  s.width = s.height = 8;
-  s.spp = 1;
+  RenderSettings s = smallSettings(scene, 8, 1);
   s.photons = 2000;
   EXPECT_THROW(renderAovs(scene, "pm", s, nlohmann::json::object(), {Aov::Direct}), SettingsError);
   // The first-hit layers need nothing of the integrator.

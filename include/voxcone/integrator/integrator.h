@@ -132,6 +132,9 @@ std::vector<Aov> parseAovs(const std::string& list);
 std::vector<std::string> aovChannels(Aov aov);
 /// Whether the layer is one of the terms (needs Integrator::separatesTerms).
 bool isTermAov(Aov aov);
+/// Throws SettingsError naming the first term layer of `layers` that `integrator` cannot
+/// separate (renderImage checks it; the CLI calls it before the integrator's prepare).
+void checkAovs(const Integrator& integrator, const std::vector<Aov>& layers);
 
 /// AOVs renderImage computes beside the beauty; `accel` finds the first hits.
 struct AovRequest {
