@@ -14,6 +14,9 @@
 #include "voxcone/core/sampling.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/scene/mesh.h"
+#ifdef VOXCONE_HBVH_COUNTERS
+#include "../src/accel/hbvh_kernels.h"
+#endif
 
 #include <CLI/CLI.hpp>
 #include <benchmark/benchmark.h>
@@ -51,6 +54,7 @@ struct Options {
   uint64_t seed = 20240611; ///< seed of every ray set
   bool allQualities = false;
   std::string jsonPath;
+  std::string only;  ///< time only this tracer (for a profiler); the others' columns stay empty
   HbvhBuildSettings hbvh;
 };
 
@@ -423,11 +427,21 @@ int run(const Options& opt) {
         ++sr.tMismatches;
     }
     sr.hitFraction = sr.rays ? double(hits) / double(sr.rays) : 0.0;
+#ifdef VOXCONE_HBVH_COUNTERS
+    if (limit.threads() == 1) {
+      hbvhCounters() = {};
+      traceAll(set.occlusion ? tracers[0].occluded : tracers[0].intersect, set.rays, out[0], 1);
+      const double n = double(set.rays.size());
+      std::printf("counters %-11s nodes/ray %.2f leaves/ray %.2f packets/ray %.2f\n", set.name.c_str(),
+                  hbvhCounters().nodes / n, hbvhCounters().leaves / n, hbvhCounters().packets / n);
+    }
+#endif
     std::vector<float> scratch;
     for (int rep = 0; rep < opt.reps; ++rep)
       for (size_t k = 0; k < tracers.size(); ++k)
-        sr.seconds[k].push_back(
-            traceAll(set.occlusion ? tracers[k].occluded : tracers[k].intersect, set.rays, scratch, limit.threads()));
+        if (opt.only.empty() || opt.only == tracers[k].name)
+          sr.seconds[k].push_back(
+              traceAll(set.occlusion ? tracers[k].occluded : tracers[k].intersect, set.rays, scratch, limit.threads()));
     results.push_back(std::move(sr));
   }
 
@@ -534,6 +548,9 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");
   app.add_option("--json", opt.jsonPath, "write the results as JSON to this path");
+  app.add_option("--only", opt.only,
+                 "time only this tracer (\"HBVH\", \"Embree MEDIUM\"), e.g. under perf record; the untimed "
+                 "verification pass still runs every tracer");
   CLI11_PARSE(app, argc, argv);
   try {
     return run(opt);

@@ -16,6 +16,17 @@ struct HbvhArrays {
   const Triangle4* tris;
 };
 
+#ifdef VOXCONE_HBVH_COUNTERS
+/// Traversal counts of this thread (a diagnostic build only: -DVOXCONE_HBVH_COUNTERS).
+struct HbvhCounters {
+  uint64_t nodes = 0, leaves = 0, packets = 0;
+};
+inline HbvhCounters& hbvhCounters() {
+  static thread_local HbvhCounters c;
+  return c;
+}
+#endif
+
 namespace sse42 {
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);

@@ -12,15 +12,14 @@
 
 namespace voxcone {
 
-bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, const WatertightRay& wr, float tMin,
-                           float tMax, float& tOut, float& b1Out, float& b2Out) {
+bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, float tMin, float tMax, float& tOut,
+                           float& b1Out, float& b2Out) {
+  const WatertightRay wr(ray.dir);
   const Vec3 p0(tri.v[0][0][lane], tri.v[0][1][lane], tri.v[0][2][lane]);
   const Vec3 p1(tri.v[1][0][lane], tri.v[1][1][lane], tri.v[1][2][lane]);
   const Vec3 p2(tri.v[2][0][lane], tri.v[2][1][lane], tri.v[2][2][lane]);
   return intersectTriangleWatertight(ray.origin, wr, p0, p1, p2, tMin, tMax, tOut, b1Out, b2Out);
 }
-
-WatertightRay makeWatertightRay(const Vec3& dir) { return WatertightRay(dir); }
 
 namespace {
 

@@ -39,30 +39,36 @@ using VFloat = __m128;  ///< one plane of four children (a node takes two)
 inline VFloat broadcast(float x) { return _mm_set1_ps(x); }
 #endif
 
-/// Per-ray constants of the box and sphere tests.
+/// Per-ray constants of the box test.
 struct RayData {
   VFloat org[3], invDir[3];
   // Per axis: byte offsets in a Node of the entry and exit planes (lo or hi by the sign of the
   // direction), so the box test has no branch.
   size_t nearOffset[3], farOffset[3];
-  const Ray& ray;
-  explicit RayData(const Ray& r) : ray(r) {
+  explicit RayData(const Ray& r) {
+    // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance; the three
+    // reciprocals in one division (each correctly rounded, as three scalar ones).
+    alignas(16) float inv[4];
+    const __m128 d = _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 1.0f);
+    const __m128 signBit = _mm_set1_ps(-0.0f);
+    const __m128 tiny = _mm_or_ps(_mm_and_ps(d, signBit), _mm_set1_ps(1e-30f));
+    const __m128 small = _mm_cmplt_ps(_mm_andnot_ps(signBit, d), _mm_set1_ps(1e-30f));
+    const __m128 safe = _mm_or_ps(_mm_and_ps(small, tiny), _mm_andnot_ps(small, d));
+    _mm_store_ps(inv, _mm_div_ps(_mm_set1_ps(1.0f), safe));
+    const int negative = _mm_movemask_ps(safe);
     for (int a = 0; a < 3; ++a) {
-      // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance.
-      float d = r.dir[a];
-      if (std::fabs(d) < 1e-30f) d = std::copysign(1e-30f, d);
       org[a] = broadcast(r.origin[a]);
-      invDir[a] = broadcast(1.0f / d);
+      invDir[a] = broadcast(inv[a]);
       const size_t lo = offsetof(Node, lo) + a * sizeof(float[kWidth]);
       const size_t hi = offsetof(Node, hi) + a * sizeof(float[kWidth]);
-      nearOffset[a] = d < 0.0f ? hi : lo;
-      farOffset[a] = d < 0.0f ? lo : hi;
+      nearOffset[a] = (negative >> a) & 1 ? hi : lo;
+      farOffset[a] = (negative >> a) & 1 ? lo : hi;
     }
   }
 };
 
 /// The sphere test's per-ray constants (a square root and a division), made on the first sphere
-/// a ray meets: few children keep one (123 of the dragon's 217k).
+/// a ray meets: few children keep one (74 of the dragon's 161k).
 struct SphereRay {
   Vec3 dirUnit{0.0f};
   float invLen = 0.0f;  ///< 0 until made
@@ -74,65 +80,70 @@ struct SphereRay {
 
 /// The slab test of the children from `first` on, one register wide: their entry distances
 /// into tNearOut[first..] and the mask of those entered, from bit 0.
-inline int enterBoxes(const Node& n, int first, const RayData& rd, float tMin, float tMax, float* tNearOut) {
+inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
-  VFloat tNear = broadcast(tMin), tFar = broadcast(kInf);
 #ifdef __AVX2__
-  for (int a = 0; a < 3; ++a) {
-    const VFloat nearPlane = _mm256_load_ps(reinterpret_cast<const float*>(base + rd.nearOffset[a]));
-    const VFloat farPlane = _mm256_load_ps(reinterpret_cast<const float*>(base + rd.farOffset[a]));
-    tNear = _mm256_max_ps(tNear, _mm256_mul_ps(_mm256_sub_ps(nearPlane, rd.org[a]), rd.invDir[a]));
-    tFar = _mm256_min_ps(tFar, _mm256_mul_ps(_mm256_sub_ps(farPlane, rd.org[a]), rd.invDir[a]));
-  }
-  tFar = _mm256_min_ps(_mm256_mul_ps(tFar, broadcast(kSlabScale)), broadcast(tMax));
-  _mm256_storeu_ps(tNearOut + first, tNear);
-  return _mm256_movemask_ps(_mm256_cmp_ps(tNear, tFar, _CMP_LE_OQ));
+  const auto load = [&](size_t offset) { return _mm256_load_ps(reinterpret_cast<const float*>(base + offset)); };
+  const auto slab = [&](size_t offset, int a) { return _mm256_mul_ps(_mm256_sub_ps(load(offset), rd.org[a]), rd.invDir[a]); };
+  const VFloat tNear = _mm256_max_ps(_mm256_max_ps(tMin, slab(rd.nearOffset[0], 0)),
+                                     _mm256_max_ps(slab(rd.nearOffset[1], 1), slab(rd.nearOffset[2], 2)));
+  const VFloat tFar = _mm256_min_ps(_mm256_min_ps(slab(rd.farOffset[0], 0), slab(rd.farOffset[1], 1)), slab(rd.farOffset[2], 2));
+  const VFloat tExit = _mm256_min_ps(_mm256_mul_ps(tFar, broadcast(kSlabScale)), tMax);
+  _mm256_store_ps(tNearOut + first, tNear);
+  return _mm256_movemask_ps(_mm256_cmp_ps(tNear, tExit, _CMP_LE_OQ));
 #else
-  for (int a = 0; a < 3; ++a) {
-    const VFloat nearPlane = _mm_load_ps(reinterpret_cast<const float*>(base + rd.nearOffset[a]));
-    const VFloat farPlane = _mm_load_ps(reinterpret_cast<const float*>(base + rd.farOffset[a]));
-    tNear = _mm_max_ps(tNear, _mm_mul_ps(_mm_sub_ps(nearPlane, rd.org[a]), rd.invDir[a]));
-    tFar = _mm_min_ps(tFar, _mm_mul_ps(_mm_sub_ps(farPlane, rd.org[a]), rd.invDir[a]));
-  }
-  tFar = _mm_min_ps(_mm_mul_ps(tFar, broadcast(kSlabScale)), broadcast(tMax));
-  _mm_storeu_ps(tNearOut + first, tNear);
-  return _mm_movemask_ps(_mm_cmple_ps(tNear, tFar));
+  const auto load = [&](size_t offset) { return _mm_load_ps(reinterpret_cast<const float*>(base + offset)); };
+  const auto slab = [&](size_t offset, int a) { return _mm_mul_ps(_mm_sub_ps(load(offset), rd.org[a]), rd.invDir[a]); };
+  const VFloat tNear = _mm_max_ps(_mm_max_ps(tMin, slab(rd.nearOffset[0], 0)),
+                                  _mm_max_ps(slab(rd.nearOffset[1], 1), slab(rd.nearOffset[2], 2)));
+  const VFloat tFar = _mm_min_ps(_mm_min_ps(slab(rd.farOffset[0], 0), slab(rd.farOffset[1], 1)), slab(rd.farOffset[2], 2));
+  const VFloat tExit = _mm_min_ps(_mm_mul_ps(tFar, broadcast(kSlabScale)), tMax);
+  _mm_store_ps(tNearOut + first, tNear);
+  return _mm_movemask_ps(_mm_cmple_ps(tNear, tExit));
 #endif
 }
 
-/// Entry distances of the eight children (+inf where missed) and the mask of those entered.
-inline int enterChildren(const Node& n, const Vec4* spheres, const RayData& rd, SphereRay& sr, float tMin,
-                         float tMax, float tNearOut[kWidth]) {
-#ifdef __AVX2__
-  int mask = enterBoxes(n, 0, rd, tMin, tMax, tNearOut);
-#else
-  int mask = enterBoxes(n, 0, rd, tMin, tMax, tNearOut) | enterBoxes(n, 4, rd, tMin, tMax, tNearOut) << 4;
-#endif
-  if (mask & n.sphereMask) {
-    // Spheres: distance of closest approach along the unit direction (Haines et al.,
-    // "Precision Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7).
-    if (sr.invLen == 0.0f) sr.make(rd.ray);
-    uint32_t sphereIdx = n.sphereBase;
-    for (int i = 0; i < kWidth; ++i) {
-      if (!(n.sphereMask & (1u << i))) continue;
-      const Vec4& s = spheres[sphereIdx++];
-      if (!(mask & (1 << i))) continue;
-      const Vec3 f = rd.ray.origin - Vec3(s);
-      const float b = -glm::dot(f, sr.dirUnit);
-      const Vec3 l = f + b * sr.dirUnit;
-      // Rounding in l grows with |f|, not with the radius: widen the radius by 1e-6 |f|.
-      const float rEff = s.w + 1e-6f * std::sqrt(glm::dot(f, f));
-      const float disc = rEff * rEff - glm::dot(l, l);
-      bool hit = disc >= 0.0f;
-      if (hit) {
-        const float h = std::sqrt(disc);
-        const float sNear = (b - h) * sr.invLen, sFar = (b + h) * sr.invLen;
-        tNearOut[i] = tNearOut[i] < sNear ? sNear : tNearOut[i];  // std::max
-        hit = tNearOut[i] <= (tMax < sFar ? tMax : sFar) && sFar >= tMin;  // std::min, inline here
-      }
-      if (!hit) mask &= ~(1 << i);
+/// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are
+/// removed from it; tNear of the others becomes the later of the box's and the sphere's entry.
+/// Out of line: few nodes have spheres, and inlined it would crowd the box test's registers.
+[[gnu::noinline]] int cullSpheres(const Node& n, const Vec4* spheres, const Ray& ray, SphereRay& sr, int mask,
+                                  float tMin, float tMax, float* tNear) {
+  // Distance of closest approach along the unit direction (Haines et al., "Precision
+  // Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7).
+  if (sr.invLen == 0.0f) sr.make(ray);
+  uint32_t sphereIdx = n.sphereBase;
+  for (int i = 0; i < kWidth; ++i) {
+    if (!(n.sphereMask & (1u << i))) continue;
+    const Vec4& s = spheres[sphereIdx++];
+    if (!(mask & (1 << i))) continue;
+    const Vec3 f = ray.origin - Vec3(s);
+    const float b = -glm::dot(f, sr.dirUnit);
+    const Vec3 l = f + b * sr.dirUnit;
+    // Rounding in l grows with |f|, not with the radius: widen the radius by 1e-6 |f|.
+    const float rEff = s.w + 1e-6f * std::sqrt(glm::dot(f, f));
+    const float disc = rEff * rEff - glm::dot(l, l);
+    bool hit = disc >= 0.0f;
+    if (hit) {
+      const float h = std::sqrt(disc);
+      const float sNear = (b - h) * sr.invLen, sFar = (b + h) * sr.invLen;
+      tNear[i] = tNear[i] < sNear ? sNear : tNear[i];  // std::max
+      hit = tNear[i] <= (tMax < sFar ? tMax : sFar) && sFar >= tMin;  // std::min, inline here
     }
+    if (!hit) mask &= ~(1 << i);
   }
+  return mask;
+}
+
+/// Entry distances of the eight children and the mask of those entered.
+inline int enterChildren(const Node& n, const Vec4* spheres, const Ray& ray, const RayData& rd, SphereRay& sr,
+                         float tMin, float tMax, float tNearOut[kWidth]) {
+  const VFloat tMinV = broadcast(tMin), tMaxV = broadcast(tMax);
+#ifdef __AVX2__
+  int mask = enterBoxes(n, 0, rd, tMinV, tMaxV, tNearOut);
+#else
+  int mask = enterBoxes(n, 0, rd, tMinV, tMaxV, tNearOut) | enterBoxes(n, 4, rd, tMinV, tMaxV, tNearOut) << 4;
+#endif
+  if (__builtin_expect((mask & n.sphereMask) != 0, 0)) mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
   return mask;
 }
 
@@ -157,11 +168,19 @@ constexpr int kStackSize = (kWidth - 1) * 96;
 
 }  // namespace
 
+#ifdef VOXCONE_HBVH_COUNTERS
+#define VOXCONE_COUNT(field, n) (hbvhCounters().field += (n))
+#else
+#define VOXCONE_COUNT(field, n) ((void)0)
+#endif
+
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   const RayData rd(ray);
   SphereRay sr;
   const RayTri4 rt(ray);
-  const Node* nodes = bvh.nodes;
+  const Node* const nodes = bvh.nodes;
+  const Vec4* const spheres = bvh.spheres;
+  const float tMin = ray.tMin;
   Hit hit;
   float tMax = ray.tMax;
   bool found = false;
@@ -171,59 +190,63 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
     float t;
   };
   Entry stack[kStackSize];
-  int sp = 0;
+  Entry* sp = stack;
   uint32_t cur = 0;  // the root node
   for (;;) {
-    if (cur & kLeafBit) {
-      // Leaf: test its packets, shrinking tMax to the nearest hit.
-      const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
-      found |= closerHits(bvh.tris + first, count, ray, rt, tMax, hit);
-    } else {
+    // Down the inner nodes to a leaf, or to a node none of whose children the ray enters.
+    while (!(cur & kLeafBit)) {
       const Node& n = nodes[cur];
+      VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
-      int mask = enterChildren(n, bvh.spheres, rd, sr, ray.tMin, tMax, tNear);
-      if (mask != 0) {
-        prefetchChildren(bvh, n, mask);
-        // One child entered: go on with it; two: push the farther; more: push all, sort them
-        // farthest first and pop the nearest (as Embree's BVHNNodeTraverser1Hit).
-        const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
-        mask &= mask - 1;
-        if (mask == 0) {
-          cur = n.child[i0];
-          continue;
-        }
-        const int i1 = __builtin_ctz(static_cast<unsigned>(mask));
-        mask &= mask - 1;
-        if (mask == 0) {
-          const bool firstNearer = tNear[i0] <= tNear[i1];
-          const int nearI = firstNearer ? i0 : i1, farI = firstNearer ? i1 : i0;
-          stack[sp++] = {n.child[farI], tNear[farI]};
-          cur = n.child[nearI];
-          continue;
-        }
-        const int base = sp;
-        stack[sp++] = {n.child[i0], tNear[i0]};
-        stack[sp++] = {n.child[i1], tNear[i1]};
-        for (; mask; mask &= mask - 1) {
-          const int i = __builtin_ctz(static_cast<unsigned>(mask));
-          stack[sp++] = {n.child[i], tNear[i]};
-        }
-        for (int j = base + 1; j < sp; ++j) {
-          const Entry e = stack[j];
-          int k = j;
-          for (; k > base && stack[k - 1].t < e.t; --k) stack[k] = stack[k - 1];
-          stack[k] = e;
-        }
-        cur = stack[--sp].ref;
+      int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+      if (mask == 0) goto pop;
+      // One child entered: go on with it; two: push the farther; more: push all, sort them
+      // farthest first and pop the nearest (as Embree's BVHNNodeTraverser1Hit).
+      const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
+      mask &= mask - 1;
+      if (mask == 0) {
+        cur = n.child[i0];
         continue;
       }
+      prefetchChildren(bvh, n, mask | (1 << i0));
+      const int i1 = __builtin_ctz(static_cast<unsigned>(mask));
+      mask &= mask - 1;
+      if (mask == 0) {
+        const bool firstNearer = tNear[i0] <= tNear[i1];
+        const int nearI = firstNearer ? i0 : i1, farI = firstNearer ? i1 : i0;
+        *sp++ = {n.child[farI], tNear[farI]};
+        cur = n.child[nearI];
+        continue;
+      }
+      Entry* const base = sp;
+      *sp++ = {n.child[i0], tNear[i0]};
+      *sp++ = {n.child[i1], tNear[i1]};
+      for (; mask; mask &= mask - 1) {
+        const int i = __builtin_ctz(static_cast<unsigned>(mask));
+        *sp++ = {n.child[i], tNear[i]};
+      }
+      for (Entry* j = base + 1; j < sp; ++j) {
+        const Entry e = *j;
+        Entry* k = j;
+        for (; k > base && k[-1].t < e.t; --k) *k = k[-1];
+        *k = e;
+      }
+      cur = (--sp)->ref;
     }
-    // Pop the next child still in front of the closest hit.
+    {
+      // Leaf: test its packets, shrinking tMax to the nearest hit.
+      const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
+      VOXCONE_COUNT(leaves, 1);
+      VOXCONE_COUNT(packets, count);
+      found |= closerHits(bvh.tris + first, count, ray, rt, tMax, hit);
+    }
+  pop:
+    // The next child still in front of the closest hit.
     for (;;) {
-      if (sp == 0) return found ? std::optional<Hit>(hit) : std::nullopt;
-      const Entry e = stack[--sp];
-      if (e.t <= tMax) {
-        cur = e.ref;
+      if (sp == stack) return found ? std::optional<Hit>(hit) : std::nullopt;
+      --sp;
+      if (sp->t <= tMax) {
+        cur = sp->ref;
         break;
       }
     }
@@ -234,31 +257,32 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
   const RayData rd(ray);
   SphereRay sr;
   const RayTri4 rt(ray);
-  const Node* nodes = bvh.nodes;
+  const Node* const nodes = bvh.nodes;
+  const Vec4* const spheres = bvh.spheres;
+  const float tMin = ray.tMin;
   uint32_t stack[kStackSize];
-  int sp = 0;
+  uint32_t* sp = stack;
   uint32_t cur = 0;
   for (;;) {
-    if (cur & kLeafBit) {
-      const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
-      if (anyHit(bvh.tris + first, count, ray, rt, tMax)) return true;
-    } else {
+    while (!(cur & kLeafBit)) {
       const Node& n = nodes[cur];
+      VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
-      int mask = enterChildren(n, bvh.spheres, rd, sr, ray.tMin, tMax, tNear);
-      if (mask != 0) {
-        // Any hit ends the query, so order does not matter: take the first, push the rest.
-        cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-        mask &= mask - 1;
-        while (mask) {
-          stack[sp++] = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-          mask &= mask - 1;
-        }
-        continue;
-      }
+      int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+      if (mask == 0) goto pop;
+      // Any hit ends the query, so order does not matter: take the first, push the rest.
+      cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
+      for (mask &= mask - 1; mask; mask &= mask - 1) *sp++ = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
     }
-    if (sp == 0) return false;
-    cur = stack[--sp];
+    {
+      const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
+      VOXCONE_COUNT(leaves, 1);
+      VOXCONE_COUNT(packets, count);
+      if (anyHit(bvh.tris + first, count, ray, rt, tMax)) return true;
+    }
+  pop:
+    if (sp == stack) return false;
+    cur = *--sp;
   }
 }
 

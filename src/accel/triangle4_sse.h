@@ -11,6 +11,9 @@
 
 #include <immintrin.h>
 
+#include <cmath>
+#include <cstdint>
+
 #ifndef VOXCONE_ISA
 #define VOXCONE_ISA sse42
 #endif
@@ -18,13 +21,10 @@
 namespace voxcone {
 
 /// intersectTriangleWatertight on lane `lane` of `tri` (hbvh_traverse.cpp, compiled for the
-/// baseline instruction set): the packet test's rare exact-zero edge lanes.
-bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, const WatertightRay& wr, float tMin,
-                           float tMax, float& tOut, float& b1Out, float& b2Out);
-/// WatertightRay(dir), made out of line in the baseline TU (hbvh_traverse.cpp): built without
-/// full inlining (a sanitizer build), the AVX2 kernels would otherwise emit their own copy of
-/// the inline constructor, which the linker may keep for every caller.
-WatertightRay makeWatertightRay(const Vec3& dir);
+/// baseline instruction set, where it makes the ray's WatertightRay): the packet test's rare
+/// exact-zero edge lanes.
+bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, float tMin, float tMax, float& tOut,
+                           float& b1Out, float& b2Out);
 
 namespace VOXCONE_ISA {
 
@@ -86,11 +86,26 @@ inline F8 operator>(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; 
 inline F8 operator>=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
 #endif
 
-/// Per-ray constants of the packet test: the scalar shear.
+/// Per-ray constants of the packet test: WatertightRay's permutation and shear (the same values;
+/// made here, without branches, rather than by WatertightRay's inline constructor, which a
+/// kernel TU would compile for its own instruction set and the linker might keep for all).
 struct RayTri4 {
-  WatertightRay wr;
+  int kx, ky, kz;
+  float sx, sy, sz;
   float org[3];
-  explicit RayTri4(const Ray& r) : wr(makeWatertightRay(r.dir)), org{r.origin.x, r.origin.y, r.origin.z} {}
+  explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
+    const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
+    const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
+    kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);  // maxDimension
+    // kx, ky follow kz cyclically, swapped where dir[kz] < 0 (winding): [kz][negative].
+    static constexpr int8_t kNext[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
+    const int neg = d[kz] < 0.0f;
+    kx = kNext[kz][neg][0];
+    ky = kNext[kz][neg][1];
+    sz = 1.0f / d[kz];
+    sx = d[kx] * sz;
+    sy = d[ky] * sz;
+  }
 };
 
 /// The watertight test (triangle.h) on F::kLanes triangles at once (lane i: packets[i / 4],
@@ -101,8 +116,8 @@ struct RayTri4 {
 template <class F>
 inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
                             float* tOut, float* b1Out, float* b2Out) {
-  const int kx = rt.wr.kx, ky = rt.wr.ky, kz = rt.wr.kz;
-  const F sx = F::broadcast(rt.wr.sx), sy = F::broadcast(rt.wr.sy), sz = F::broadcast(rt.wr.sz);
+  const int kx = rt.kx, ky = rt.ky, kz = rt.kz;
+  const F sx = F::broadcast(rt.sx), sy = F::broadcast(rt.sy), sz = F::broadcast(rt.sz);
   F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
   for (int vtx = 0; vtx < 3; ++vtx) {
     const F x = F::load(packets, vtx, kx) - F::broadcast(rt.org[kx]);
@@ -154,7 +169,7 @@ inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayT
   }
   for (int lanes = zeroLanes; lanes; lanes &= lanes - 1) {
     const int i = __builtin_ctz(static_cast<unsigned>(lanes));
-    if (intersectTriangleLane(packets[i / 4], i % 4, ray, rt.wr, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
+    if (intersectTriangleLane(packets[i / 4], i % 4, ray, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
       mask |= 1 << i;
   }
   return mask;

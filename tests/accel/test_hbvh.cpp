@@ -13,6 +13,7 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/test_scenes.h"
+#include "../../src/accel/triangle4_sse.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -21,6 +22,7 @@
 
 #include <atomic>
 #include <cstdio>
+#include <cstring>
 #include <functional>
 #include <sstream>
 
@@ -371,6 +373,32 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
       EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio;
       EXPECT_GT(hits, 5000) << s.name;
     }
+  }
+}
+
+TEST(Hbvh, PacketRayConstantsAreTheWatertightRays) {
+  // The packet test makes the watertight test's permutation and shear itself (RayTri4); every
+  // lane equals the scalar test only if they are WatertightRay's, bit for bit: ties between
+  // axes, signed zeros, each octant, random directions.
+  std::vector<Vec3> dirs;
+  const float values[] = {0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -0.5f, 1e-30f, -3.0f};
+  for (float x : values)
+    for (float y : values)
+      for (float z : values)
+        if (x != 0.0f || y != 0.0f || z != 0.0f) dirs.emplace_back(x, y, z);
+  Rng rng(7, 0);
+  for (int i = 0; i < 10000; ++i) dirs.push_back(sampleUniformSphere(rng.uniform2()) * (0.1f + 10.0f * rng.uniform()));
+  for (const Vec3& d : dirs) {
+    Ray r;
+    r.dir = d;
+    const WatertightRay wr(d);
+    const sse42::RayTri4 rt(r);
+    ASSERT_EQ(rt.kx, wr.kx) << d.x << " " << d.y << " " << d.z;
+    ASSERT_EQ(rt.ky, wr.ky);
+    ASSERT_EQ(rt.kz, wr.kz);
+    ASSERT_EQ(std::memcmp(&rt.sx, &wr.sx, sizeof(float)), 0);
+    ASSERT_EQ(std::memcmp(&rt.sy, &wr.sy, sizeof(float)), 0);
+    ASSERT_EQ(std::memcmp(&rt.sz, &wr.sz, sizeof(float)), 0);
   }
 }
 
