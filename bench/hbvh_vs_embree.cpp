@@ -54,6 +54,7 @@ struct Options {
   uint64_t seed = 20240611; ///< seed of every ray set
   bool allQualities = false;
   std::string jsonPath;
+  std::string set;   ///< trace only this ray set (for a profiler)
   std::string only;  ///< time only this tracer (for a profiler); the others' columns stay empty
   HbvhBuildSettings hbvh;
 };
@@ -407,6 +408,7 @@ int run(const Options& opt) {
   // Trace: one untimed pass (warm-up and verification), then interleaved timed repetitions.
   std::vector<SetResult> results;
   for (const RaySet& set : sets) {
+    if (!opt.set.empty() && set.name != opt.set) continue;
     SetResult sr;
     sr.name = set.name;
     sr.rays = set.rays.size();
@@ -548,6 +550,7 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");
   app.add_option("--json", opt.jsonPath, "write the results as JSON to this path");
+  app.add_option("--set", opt.set, "trace only this ray set (primary, incoherent, secondary, occlusion)");
   app.add_option("--only", opt.only,
                  "time only this tracer (\"HBVH\", \"Embree MEDIUM\"), e.g. under perf record; the untimed "
                  "verification pass still runs every tracer");

@@ -18,6 +18,8 @@
 #include <immintrin.h>
 
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 
 namespace voxcone {
 namespace VOXCONE_ISA {
@@ -174,6 +176,30 @@ constexpr int kStackSize = (kWidth - 1) * 96;
 #define VOXCONE_COUNT(field, n) ((void)0)
 #endif
 
+/// A closest-hit stack entry: a child and its entry distance, in one 64-bit word whose signed
+/// order is the distance's (the float's bits above the reference; entry distances are at least
+/// tMin, so never negative but for -0, which orders as nearest), ties by reference. Ordering
+/// by the word needs no branch: compilers make conditional moves of the exchanges below.
+using Entry = int64_t;
+inline Entry makeEntry(uint32_t ref, float t) {
+  uint32_t bits;
+  std::memcpy(&bits, &t, sizeof bits);
+  return Entry((uint64_t(bits) << 32) | ref);
+}
+inline uint32_t entryRef(Entry e) { return uint32_t(uint64_t(e)); }
+inline float entryT(Entry e) {
+  const uint32_t bits = uint32_t(uint64_t(e) >> 32);
+  float t;
+  std::memcpy(&t, &bits, sizeof t);
+  return t;
+}
+/// a, deeper in the stack, takes the farther of the two.
+inline void farFirst(Entry& a, Entry& b) {
+  const Entry lo = a < b ? a : b, hi = a < b ? b : a;
+  a = hi;
+  b = lo;
+}
+
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   const RayData rd(ray);
   SphereRay sr;
@@ -185,10 +211,6 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   float tMax = ray.tMax;
   bool found = false;
 
-  struct Entry {
-    uint32_t ref;
-    float t;
-  };
   Entry stack[kStackSize];
   Entry* sp = stack;
   uint32_t cur = 0;  // the root node
@@ -200,8 +222,9 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       alignas(32) float tNear[kWidth];
       int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
       if (mask == 0) goto pop;
-      // One child entered: go on with it; two: push the farther; more: push all, sort them
-      // farthest first and pop the nearest (as Embree's BVHNNodeTraverser1Hit).
+      // One child entered: go on with it; two: push the farther; three or four: push all, sort
+      // them farthest first by a sorting network and pop the nearest; more: insertion sort (as
+      // Embree's BVHNNodeTraverser1Hit, here without branches on the distances).
       const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
       mask &= mask - 1;
       if (mask == 0) {
@@ -214,24 +237,40 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       if (mask == 0) {
         const bool firstNearer = tNear[i0] <= tNear[i1];
         const int nearI = firstNearer ? i0 : i1, farI = firstNearer ? i1 : i0;
-        *sp++ = {n.child[farI], tNear[farI]};
+        *sp++ = makeEntry(n.child[farI], tNear[farI]);
         cur = n.child[nearI];
         continue;
       }
+      Entry e0 = makeEntry(n.child[i0], tNear[i0]);
+      Entry e1 = makeEntry(n.child[i1], tNear[i1]);
       Entry* const base = sp;
-      *sp++ = {n.child[i0], tNear[i0]};
-      *sp++ = {n.child[i1], tNear[i1]};
+      sp[0] = e0;
+      sp[1] = e1;
+      sp += 2;
       for (; mask; mask &= mask - 1) {
         const int i = __builtin_ctz(static_cast<unsigned>(mask));
-        *sp++ = {n.child[i], tNear[i]};
+        *sp++ = makeEntry(n.child[i], tNear[i]);
       }
-      for (Entry* j = base + 1; j < sp; ++j) {
-        const Entry e = *j;
-        Entry* k = j;
-        for (; k > base && k[-1].t < e.t; --k) *k = k[-1];
-        *k = e;
+      const long count = sp - base;
+      if (count == 3) {
+        farFirst(base[0], base[1]);
+        farFirst(base[1], base[2]);
+        farFirst(base[0], base[1]);
+      } else if (count == 4) {
+        farFirst(base[0], base[1]);
+        farFirst(base[2], base[3]);
+        farFirst(base[0], base[2]);
+        farFirst(base[1], base[3]);
+        farFirst(base[1], base[2]);
+      } else {
+        for (Entry* j = base + 1; j < sp; ++j) {
+          const Entry e = *j;
+          Entry* k = j;
+          for (; k > base && k[-1] < e; --k) *k = k[-1];
+          *k = e;
+        }
       }
-      cur = (--sp)->ref;
+      cur = entryRef(*--sp);
     }
     {
       // Leaf: test its packets, shrinking tMax to the nearest hit.
@@ -245,8 +284,8 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
     for (;;) {
       if (sp == stack) return found ? std::optional<Hit>(hit) : std::nullopt;
       --sp;
-      if (sp->t <= tMax) {
-        cur = sp->ref;
+      if (entryT(*sp) <= tMax) {
+        cur = entryRef(*sp);
         break;
       }
     }
