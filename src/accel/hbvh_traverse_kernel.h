@@ -166,7 +166,7 @@ inline void prefetchChildren(const HbvhArrays& bvh, const Node& n, int mask) {
 /// Stack depth: at most kWidth - 1 entries per level of the path; the 8-wide tree is no deeper
 /// than the binary one, whose depth stays below kMaxDepth + log2(triangles) = 60 + 25 (the
 /// build), rounded up to 96.
-constexpr int kStackSize = (kWidth - 1) * 96;
+constexpr int kStackSize = (kWidth - 1) * 96 + kWidth;  // + kWidth: occlusion writes every slot past the top
 
 }  // namespace
 
@@ -310,8 +310,14 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
       if (mask == 0) goto pop;
       // Any hit ends the query, so order does not matter: take the first, push the rest.
+      // The others are pushed without a branch per child: every slot is written, and the stack
+      // grows only over those entered.
       cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-      for (mask &= mask - 1; mask; mask &= mask - 1) *sp++ = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
+      mask &= mask - 1;
+      for (int i = 0; i < kWidth; ++i) {
+        *sp = n.child[i];
+        sp += (mask >> i) & 1;
+      }
     }
     {
       const uint32_t first = cur & kSlotMask, count = ((cur & ~kLeafBit) >> kCountShift) + 1u;
