@@ -160,6 +160,8 @@ inline void prefetchChildren(const HbvhArrays& bvh, const Node& n, int mask) {
     _mm_prefetch(p, _MM_HINT_T0);
     _mm_prefetch(p + 64, _MM_HINT_T0);
     _mm_prefetch(p + 128, _MM_HINT_T0);
+    _mm_prefetch(p + 192, _MM_HINT_T0);
+    if (c & kLeafBit) _mm_prefetch(p + 256, _MM_HINT_T0);
   }
 }
 
@@ -228,6 +230,7 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
       mask &= mask - 1;
       if (mask == 0) {
+        prefetchChildren(bvh, n, 1 << i0);
         cur = n.child[i0];
         continue;
       }

@@ -132,11 +132,12 @@ inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayT
   const F w = px[1] * py[0] - py[1] * px[0];
   const F zero = F::zero();
   const int zeroLanes = ((u == zero) | (v == zero) | (w == zero)).mask();
-  // Inside when all three share a sign; NaN lanes (padding) compare false everywhere.
-  const F allPos = (u >= zero) & (v >= zero) & (w >= zero);
-  const F allNeg = (u <= zero) & (v <= zero) & (w <= zero);
+  // Inside when all three share a sign: their sign bits agree, so (u ^ v) | (u ^ w) has a clear
+  // sign bit. Exact zeros, whose sign says nothing, are the scalar test's (zeroLanes, below);
+  // NaN lanes (padding) fail the ordered distance comparisons.
   const F det = u + v + w;
-  F valid = (allPos | allNeg) & (det != zero);
+  const F mixedSigns = (u ^ v) | (u ^ w);
+  F valid = andNot(mixedSigns, det != zero);  // det != zero is all ones or zero: its sign bit
   // Scaled distance compared against the range before dividing; |det| and the sign-flipped
   // distance replace the scalar test's two branches.
   const F tScaled = u * (sz * pz[0]) + v * (sz * pz[1]) + w * (sz * pz[2]);
