@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cstring>
 #include <deque>
 #include <limits>
 #include <memory>
@@ -391,6 +392,25 @@ struct Hbvh::Flattener {
     int depth = 0;  ///< levels of Nodes below and including this one
     std::unique_ptr<Collapsed> sub[kWidth];  ///< for inner kids
   };
+  /// Write the leaf of triangles ids[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
+  /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes.
+  void packLeaf(const uint32_t* ids, uint32_t count, float* out) const {
+    const uint32_t packets = (count + 3u) / 4u;
+    const auto put = [&](float* block, int stride, uint32_t first) {
+      for (int lane = 0; lane < stride; ++lane) {
+        const bool used = first + lane < count;
+        const uint32_t id = used ? ids[first + lane] : 0u;
+        std::memcpy(block + 9 * stride + lane, &id, sizeof id);
+        for (int vtx = 0; vtx < 3; ++vtx) {
+          const Vec3 v = used ? pos[tris[id][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
+          for (int a = 0; a < 3; ++a) block[(3 * vtx + a) * stride + lane] = v[a];
+        }
+      }
+    };
+    uint32_t first = 0;
+    for (uint32_t p = 1; p < packets; p += 2, first += 8, out += 80) put(out, 8, first);
+    if (packets & 1u) put(out, 4, first);
+  }
   /// Subtrees of more triangles than the build's parallel threshold are measured and filled
   /// as parallel tasks.
   uint32_t parallelFill() const { return uint32_t(bvh.m_settings.parallelThreshold); }
@@ -505,7 +525,7 @@ struct Hbvh::Flattener {
       if (b.leaf()) {
         uint32_t ids[64];  // maxLeafSize <= 64
         for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
-        packTriangles(pos, tris, ids, b.count, bvh.m_tris.data() + starts[i][2]);
+        packLeaf(ids, b.count, reinterpret_cast<float*>(bvh.m_leaves.data() + starts[i][2]));
       } else {
         fill(*c.sub[i], starts[i][0], starts[i][1], starts[i][2], c.kids[i]->count);
       }
@@ -574,6 +594,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
   static_assert((kLeafBit >> kCountShift) == 64, "packet counts 1..64 must fit between the leaf bit and the slot");
+  static_assert(sizeof(LeafUnit) == sizeof(Triangle4) && sizeof(LeafUnit) == 160, "a leaf unit is a packet");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
@@ -602,7 +623,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
-  m_tris.clear();
+  m_leaves.clear();
   m_stats = HbvhStats();
   m_stats.triangles = builder.refs.size();
   if (builder.refs.empty()) {
@@ -620,7 +641,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   std::unique_ptr<Flattener::Collapsed> top = flat.measure(*root);
   m_nodes.resize(top->nodes);
   m_spheres.resize(top->spheres);
-  m_tris.resize(top->packets);
+  m_leaves.resize(top->packets);
   flat.fill(*top, 0, 0, 0, root->count);
   m_stats.nodes = m_nodes.size();
   m_stats.leaves = top->leaves;
@@ -628,7 +649,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_stats.maxDepth = top->depth;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_tris.size() * sizeof(Triangle4);
+  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_leaves.size() * sizeof(LeafUnit);
   // Free the build trees before timing stops.
   builder.arena.clear();
   top.reset();

@@ -13,7 +13,9 @@ namespace voxcone {
 struct HbvhArrays {
   const Hbvh::Node* nodes;
   const Vec4* spheres;
-  const Triangle4* tris;
+  const float* leaves;  ///< Hbvh::LeafUnit's floats
+  /// The first float of the leaf whose first unit is `unit`.
+  const float* leaf(uint32_t unit) const { return leaves + size_t(unit) * (sizeof(Hbvh::LeafUnit) / sizeof(float)); }
 };
 
 #ifdef VOXCONE_HBVH_COUNTERS

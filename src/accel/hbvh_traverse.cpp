@@ -12,13 +12,14 @@
 
 namespace voxcone {
 
-bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, float tMin, float tMax, float& tOut,
-                           float& b1Out, float& b2Out) {
+bool intersectTriangleLane(const float* base, int stride, int lane, const Ray& ray, float tMin, float tMax,
+                           float& tOut, float& b1Out, float& b2Out) {
   const WatertightRay wr(ray.dir);
-  const Vec3 p0(tri.v[0][0][lane], tri.v[0][1][lane], tri.v[0][2][lane]);
-  const Vec3 p1(tri.v[1][0][lane], tri.v[1][1][lane], tri.v[1][2][lane]);
-  const Vec3 p2(tri.v[2][0][lane], tri.v[2][1][lane], tri.v[2][2][lane]);
-  return intersectTriangleWatertight(ray.origin, wr, p0, p1, p2, tMin, tMax, tOut, b1Out, b2Out);
+  const auto vertex = [&](int vtx) {
+    const float* rows = base + 3 * vtx * stride + lane;
+    return Vec3(rows[0], rows[stride], rows[2 * stride]);
+  };
+  return intersectTriangleWatertight(ray.origin, wr, vertex(0), vertex(1), vertex(2), tMin, tMax, tOut, b1Out, b2Out);
 }
 
 namespace {
@@ -52,7 +53,7 @@ void Hbvh::setSimd(Simd simd) {
 
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_tris.data()};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
 #endif
@@ -61,7 +62,7 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
 
 bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_tris.data()};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);
 #endif

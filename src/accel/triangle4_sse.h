@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 #ifndef VOXCONE_ISA
 #define VOXCONE_ISA sse42
@@ -23,8 +24,10 @@ namespace voxcone {
 /// intersectTriangleWatertight on lane `lane` of `tri` (hbvh_traverse.cpp, compiled for the
 /// baseline instruction set, where it makes the ray's WatertightRay): the packet test's rare
 /// exact-zero edge lanes.
-bool intersectTriangleLane(const Triangle4& tri, int lane, const Ray& ray, float tMin, float tMax, float& tOut,
-                           float& b1Out, float& b2Out);
+/// Lanes are rows of floats: coordinate [vtx][axis] of lane i at base[(3 vtx + axis) stride + i]
+/// (a Triangle4: stride 4; an HBVH leaf's packet pair: stride 8).
+bool intersectTriangleLane(const float* base, int stride, int lane, const Ray& ray, float tMin, float tMax,
+                           float& tOut, float& b1Out, float& b2Out);
 
 namespace VOXCONE_ISA {
 
@@ -34,8 +37,7 @@ struct F4 {
   __m128 v;
   static F4 broadcast(float x) { return {_mm_set1_ps(x)}; }
   static F4 zero() { return {_mm_setzero_ps()}; }
-  /// Coordinate [vtx][axis] of packets[0].
-  static F4 load(const Triangle4* packets, int vtx, int axis) { return {_mm_load_ps(packets[0].v[vtx][axis])}; }
+  static F4 load(const float* row) { return {_mm_load_ps(row)}; }
   void store(float* out) const { _mm_storeu_ps(out, v); }
   int mask() const { return _mm_movemask_ps(v); }
 };
@@ -56,16 +58,13 @@ inline F4 operator>(F4 a, F4 b) { return {_mm_cmpgt_ps(a.v, b.v)}; }
 inline F4 operator>=(F4 a, F4 b) { return {_mm_cmpge_ps(a.v, b.v)}; }
 
 #ifdef __AVX2__
-/// Eight floats (AVX): lanes 0-3 from one packet, 4-7 from the next.
+/// Eight floats (AVX): a row of an HBVH leaf's packet pair in one load.
 struct F8 {
   static constexpr int kLanes = 8;
   __m256 v;
   static F8 broadcast(float x) { return {_mm256_set1_ps(x)}; }
   static F8 zero() { return {_mm256_setzero_ps()}; }
-  static F8 load(const Triangle4* packets, int vtx, int axis) {
-    return {_mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(packets[0].v[vtx][axis])),
-                                 _mm_load_ps(packets[1].v[vtx][axis]), 1)};
-  }
+  static F8 load(const float* row) { return {_mm256_load_ps(row)}; }
   void store(float* out) const { _mm256_storeu_ps(out, v); }
   int mask() const { return _mm256_movemask_ps(v); }
 };
@@ -108,21 +107,22 @@ struct RayTri4 {
   }
 };
 
-/// The watertight test (triangle.h) on F::kLanes triangles at once (lane i: packets[i / 4],
-/// its lane i % 4), with the same operations in the same order as the scalar test, so both give
+/// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`, `stride`
+/// floats apart; F8 needs stride 8), with the same operations in the same order as the scalar test, so both give
 /// the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
 /// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
 /// and barycentrics.
 template <class F>
-inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
-                            float* tOut, float* b1Out, float* b2Out) {
+inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTri4& rt, float tMin,
+                            float tMax, float* tOut, float* b1Out, float* b2Out) {
   const int kx = rt.kx, ky = rt.ky, kz = rt.kz;
   const F sx = F::broadcast(rt.sx), sy = F::broadcast(rt.sy), sz = F::broadcast(rt.sz);
   F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
   for (int vtx = 0; vtx < 3; ++vtx) {
-    const F x = F::load(packets, vtx, kx) - F::broadcast(rt.org[kx]);
-    const F y = F::load(packets, vtx, ky) - F::broadcast(rt.org[ky]);
-    pz[vtx] = F::load(packets, vtx, kz) - F::broadcast(rt.org[kz]);
+    const float* rows = base + 3 * vtx * stride;
+    const F x = F::load(rows + kx * stride) - F::broadcast(rt.org[kx]);
+    const F y = F::load(rows + ky * stride) - F::broadcast(rt.org[ky]);
+    pz[vtx] = F::load(rows + kz * stride) - F::broadcast(rt.org[kz]);
     px[vtx] = x - sx * pz[vtx];
     py[vtx] = y - sy * pz[vtx];
   }
@@ -170,44 +170,31 @@ inline int intersectPackets(const Triangle4* packets, const Ray& ray, const RayT
   }
   for (int lanes = zeroLanes; lanes; lanes &= lanes - 1) {
     const int i = __builtin_ctz(static_cast<unsigned>(lanes));
-    if (intersectTriangleLane(packets[i / 4], i % 4, ray, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
+    if (intersectTriangleLane(base, stride, i, ray, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
       mask |= 1 << i;
   }
   return mask;
 }
 
-/// One packet, four lanes (the kd-tree's and the SSE kernels' test).
+/// One packet, four lanes (the kd-tree's test).
 inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
                               float tOut[4], float b1Out[4], float b2Out[4]) {
-  return intersectPackets<F4>(&tri, ray, rt, tMin, tMax, tOut, b1Out, b2Out);
+  return intersectPackets<F4>(tri.v[0][0], 4, ray, rt, tMin, tMax, tOut, b1Out, b2Out);
 }
 
-/// Packets [first, first + count) tested against the closest-hit query so far (tMax, hit), two
-/// at a time: both packets of a pair against the same tMax, their eight lanes then taken in
-/// order (the nearest, the first of equals, becomes the closest). With AVX2 a pair is one
-/// 8-wide test; without, two 4-wide ones with the same result. True when one was closer.
+/// Packets [first, first + count) against the closest-hit query so far (tMax, hit), one at a
+/// time, lanes in order (the nearest, the first of equals, becomes the closest): the kd-tree's
+/// leaves. True when one was closer.
 inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float& tMax,
                        Hit& hit) {
   bool found = false;
-  for (uint32_t p = 0; p < count; p += 2) {
-    const Triangle4* packets = first + p;
-    alignas(32) float t[8], b1[8], b2[8];
-    int mask;
-    if (p + 1 == count) {
-      mask = intersectPackets<F4>(packets, ray, rt, ray.tMin, tMax, t, b1, b2);
-    } else {
-#ifdef __AVX2__
-      mask = intersectPackets<F8>(packets, ray, rt, ray.tMin, tMax, t, b1, b2);
-#else
-      mask = intersectPackets<F4>(packets, ray, rt, ray.tMin, tMax, t, b1, b2) |
-             intersectPackets<F4>(packets + 1, ray, rt, ray.tMin, tMax, t + 4, b1 + 4, b2 + 4) << 4;
-#endif
-    }
-    for (; mask; mask &= mask - 1) {
+  for (uint32_t p = 0; p < count; ++p) {
+    alignas(16) float t[4], b1[4], b2[4];
+    for (int mask = intersectTriangle4(first[p], ray, rt, ray.tMin, tMax, t, b1, b2); mask; mask &= mask - 1) {
       const int i = __builtin_ctz(static_cast<unsigned>(mask));
       if (t[i] < tMax) {
         tMax = t[i];
-        hit = {t[i], packets[i / 4].id[i % 4], b1[i], b2[i]};
+        hit = {t[i], first[p].id[i], b1[i], b2[i]};
         found = true;
       }
     }
@@ -215,20 +202,69 @@ inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, c
   return found;
 }
 
-/// Any hit among packets [first, first + count) in (tMin, tMax), two packets at a time.
+/// Any hit among packets [first, first + count) in (tMin, tMax).
 inline bool anyHit(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float tMax) {
-  for (uint32_t p = 0; p < count; p += 2) {
-    alignas(32) float t[8], b1[8], b2[8];
-#ifdef __AVX2__
-    if (p + 1 < count) {
-      if (intersectPackets<F8>(first + p, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
-      continue;
-    }
-#endif
-    if (intersectPackets<F4>(first + p, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
-    if (p + 1 < count && intersectPackets<F4>(first + p + 1, ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
-  }
+  alignas(16) float t[4], b1[4], b2[4];
+  for (uint32_t p = 0; p < count; ++p)
+    if (intersectTriangle4(first[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
   return false;
+}
+
+/// An HBVH leaf (hbvh.h, Hbvh::LeafUnit): its packets in pairs, each pair eight lanes per row
+/// (stride 8, ids after the nine rows), and an odd last packet as a Triangle4 (stride 4).
+/// Lanes of a pair are tested together, with AVX2 in one 8-wide test, without in two 4-wide
+/// ones with the same result.
+constexpr int kPairFloats = 80, kPairIds = 72, kSingleIds = 36;
+
+inline uint32_t laneId(const float* block, int idOffset, int lane) {
+  uint32_t id;
+  std::memcpy(&id, block + idOffset + lane, sizeof id);
+  return id;
+}
+
+/// Eight lanes of pair `block`: the mask of those hit, their t and barycentrics.
+inline int intersectPair(const float* block, const Ray& ray, const RayTri4& rt, float tMax, float* t, float* b1,
+                         float* b2) {
+#ifdef __AVX2__
+  return intersectPackets<F8>(block, 8, ray, rt, ray.tMin, tMax, t, b1, b2);
+#else
+  return intersectPackets<F4>(block, 8, ray, rt, ray.tMin, tMax, t, b1, b2) |
+         intersectPackets<F4>(block + 4, 8, ray, rt, ray.tMin, tMax, t + 4, b1 + 4, b2 + 4) << 4;
+#endif
+}
+
+/// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, hit),
+/// a pair at a time against the same tMax, lanes in order. True when one was closer.
+inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float& tMax,
+                           Hit& hit) {
+  bool found = false;
+  const auto take = [&](int mask, const float* block, int idOffset, const float* t, const float* b1,
+                        const float* b2) {
+    for (; mask; mask &= mask - 1) {
+      const int i = __builtin_ctz(static_cast<unsigned>(mask));
+      if (t[i] < tMax) {
+        tMax = t[i];
+        hit = {t[i], laneId(block, idOffset, i), b1[i], b2[i]};
+        found = true;
+      }
+    }
+  };
+  alignas(32) float t[8], b1[8], b2[8];
+  const float* block = leaf;
+  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
+    take(intersectPair(block, ray, rt, tMax, t, b1, b2), block, kPairIds, t, b1, b2);
+  if (packets & 1u)
+    take(intersectPackets<F4>(block, 4, ray, rt, ray.tMin, tMax, t, b1, b2), block, kSingleIds, t, b1, b2);
+  return found;
+}
+
+/// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
+inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float tMax) {
+  alignas(32) float t[8], b1[8], b2[8];
+  const float* block = leaf;
+  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
+    if (intersectPair(block, ray, rt, tMax, t, b1, b2)) return true;
+  return (packets & 1u) && intersectPackets<F4>(block, 4, ray, rt, ray.tMin, tMax, t, b1, b2);
 }
 
 }  // namespace VOXCONE_ISA

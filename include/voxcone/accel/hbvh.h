@@ -62,13 +62,21 @@ public:
   struct alignas(64) Node {
     float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][kWidth];
-    uint32_t child[kWidth];  ///< node index, or kLeafBit | (packets - 1) << kCountShift | first packet
+    uint32_t child[kWidth];  ///< node index, or kLeafBit | (packets - 1) << kCountShift | first LeafUnit
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
   static constexpr uint32_t kLeafBit = 0x80000000u;
   static constexpr uint32_t kCountShift = 25;  ///< leaves hold up to 64 packets
   static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;
+  /// Leaf storage, a packet's worth (160 bytes) per unit: a leaf's packets in pairs, each row of
+  /// a pair (a coordinate of eight triangles) eight consecutive floats, so that the AVX2 test
+  /// loads it in one instruction, then the ids; an odd last packet as a Triangle4 (four floats a
+  /// row). Floats only, ids by their bits.
+  struct alignas(32) LeafUnit {
+    float f[40];
+    LeafUnit() {}  // sized first, filled in parallel: no zeroing
+  };
 
 
   Hbvh() = default;
@@ -111,7 +119,7 @@ private:
   Simd m_simd = hostSimd();
   std::vector<Node, HugePageAllocator<Node>> m_nodes;
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
-  std::vector<Triangle4, HugePageAllocator<Triangle4>> m_tris;  ///< leaf triangles, four to a packet, in leaf order
+  std::vector<LeafUnit, HugePageAllocator<LeafUnit>> m_leaves;  ///< leaf triangles, in leaf order
 };
 
 }  // namespace voxcone
