@@ -393,7 +393,8 @@ struct Hbvh::Flattener {
     std::unique_ptr<Collapsed> sub[kWidth];  ///< for inner kids
   };
   /// Write the leaf of triangles ids[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
-  /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes.
+  /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes
+  /// (read by closerHitsLeaf / anyHitLeaf in triangle4_sse.h: a pair is 80 floats, ids at row 9).
   void packLeaf(const uint32_t* ids, uint32_t count, float* out) const {
     const uint32_t packets = (count + 3u) / 4u;
     const auto put = [&](float* block, int stride, uint32_t first) {

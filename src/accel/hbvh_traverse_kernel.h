@@ -36,9 +36,23 @@ constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x
 #ifdef __AVX2__
 using VFloat = __m256;  ///< one plane of all eight children
 inline VFloat broadcast(float x) { return _mm256_set1_ps(x); }
+inline VFloat load(const float* p) { return _mm256_load_ps(p); }
+inline void store(float* p, VFloat a) { _mm256_store_ps(p, a); }
+inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
+inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
+inline VFloat vmin(VFloat a, VFloat b) { return _mm256_min_ps(a, b); }
+inline VFloat vmax(VFloat a, VFloat b) { return _mm256_max_ps(a, b); }
+inline int lessEqualMask(VFloat a, VFloat b) { return _mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ)); }
 #else
 using VFloat = __m128;  ///< one plane of four children (a node takes two)
 inline VFloat broadcast(float x) { return _mm_set1_ps(x); }
+inline VFloat load(const float* p) { return _mm_load_ps(p); }
+inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
+inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
+inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
+inline VFloat vmin(VFloat a, VFloat b) { return _mm_min_ps(a, b); }
+inline VFloat vmax(VFloat a, VFloat b) { return _mm_max_ps(a, b); }
+inline int lessEqualMask(VFloat a, VFloat b) { return _mm_movemask_ps(_mm_cmple_ps(a, b)); }
 #endif
 
 /// Per-ray constants of the box test.
@@ -84,25 +98,13 @@ struct SphereRay {
 /// into tNearOut[first..] and the mask of those entered, from bit 0.
 inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
-#ifdef __AVX2__
-  const auto load = [&](size_t offset) { return _mm256_load_ps(reinterpret_cast<const float*>(base + offset)); };
-  const auto slab = [&](size_t offset, int a) { return _mm256_mul_ps(_mm256_sub_ps(load(offset), rd.org[a]), rd.invDir[a]); };
-  const VFloat tNear = _mm256_max_ps(_mm256_max_ps(tMin, slab(rd.nearOffset[0], 0)),
-                                     _mm256_max_ps(slab(rd.nearOffset[1], 1), slab(rd.nearOffset[2], 2)));
-  const VFloat tFar = _mm256_min_ps(_mm256_min_ps(slab(rd.farOffset[0], 0), slab(rd.farOffset[1], 1)), slab(rd.farOffset[2], 2));
-  const VFloat tExit = _mm256_min_ps(_mm256_mul_ps(tFar, broadcast(kSlabScale)), tMax);
-  _mm256_store_ps(tNearOut + first, tNear);
-  return _mm256_movemask_ps(_mm256_cmp_ps(tNear, tExit, _CMP_LE_OQ));
-#else
-  const auto load = [&](size_t offset) { return _mm_load_ps(reinterpret_cast<const float*>(base + offset)); };
-  const auto slab = [&](size_t offset, int a) { return _mm_mul_ps(_mm_sub_ps(load(offset), rd.org[a]), rd.invDir[a]); };
-  const VFloat tNear = _mm_max_ps(_mm_max_ps(tMin, slab(rd.nearOffset[0], 0)),
-                                  _mm_max_ps(slab(rd.nearOffset[1], 1), slab(rd.nearOffset[2], 2)));
-  const VFloat tFar = _mm_min_ps(_mm_min_ps(slab(rd.farOffset[0], 0), slab(rd.farOffset[1], 1)), slab(rd.farOffset[2], 2));
-  const VFloat tExit = _mm_min_ps(_mm_mul_ps(tFar, broadcast(kSlabScale)), tMax);
-  _mm_store_ps(tNearOut + first, tNear);
-  return _mm_movemask_ps(_mm_cmple_ps(tNear, tExit));
-#endif
+  const auto slab = [&](const size_t* offsets, int a) {
+    return mul(sub(load(reinterpret_cast<const float*>(base + offsets[a])), rd.org[a]), rd.invDir[a]);
+  };
+  const VFloat tNear = vmax(vmax(tMin, slab(rd.nearOffset, 0)), vmax(slab(rd.nearOffset, 1), slab(rd.nearOffset, 2)));
+  const VFloat tFar = vmin(vmin(slab(rd.farOffset, 0), slab(rd.farOffset, 1)), slab(rd.farOffset, 2));
+  store(tNearOut + first, tNear);
+  return lessEqualMask(tNear, vmin(mul(tFar, broadcast(kSlabScale)), tMax));
 }
 
 /// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are
@@ -145,7 +147,8 @@ inline int enterChildren(const Node& n, const Vec4* spheres, const Ray& ray, con
 #else
   int mask = enterBoxes(n, 0, rd, tMinV, tMaxV, tNearOut) | enterBoxes(n, 4, rd, tMinV, tMaxV, tNearOut) << 4;
 #endif
-  if (__builtin_expect((mask & n.sphereMask) != 0, 0)) mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
+  if (__builtin_expect((mask & n.sphereMask) != 0, 0))
+    mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
   return mask;
 }
 
@@ -243,12 +246,9 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
         cur = n.child[nearI];
         continue;
       }
-      Entry e0 = makeEntry(n.child[i0], tNear[i0]);
-      Entry e1 = makeEntry(n.child[i1], tNear[i1]);
       Entry* const base = sp;
-      sp[0] = e0;
-      sp[1] = e1;
-      sp += 2;
+      *sp++ = makeEntry(n.child[i0], tNear[i0]);
+      *sp++ = makeEntry(n.child[i1], tNear[i1]);
       for (; mask; mask &= mask - 1) {
         const int i = __builtin_ctz(static_cast<unsigned>(mask));
         *sp++ = makeEntry(n.child[i], tNear[i]);
