@@ -494,6 +494,7 @@ int run(const Options& opt) {
     j["hbvh_settings"] = {{"bin_count", opt.hbvh.binCount},
                           {"max_leaf_size", opt.hbvh.maxLeafSize},
                           {"sphere_area_ratio", opt.hbvh.sphereAreaRatio},
+                          {"sphere_test_cost", opt.hbvh.sphereTestCost},
                           {"traversal_cost", opt.hbvh.traversalCost},
                           {"intersection_cost", opt.hbvh.intersectionCost},
                           {"leaf_test_width", opt.hbvh.leafTestWidth}};
@@ -541,6 +542,7 @@ int main(int argc, char** argv) {
   app.add_option("--resolution", opt.resolution, "primary rays: N x N; other sets follow")->check(CLI::PositiveNumber);
   app.add_option("--seed", opt.seed, "seed of the ray sets");
   app.add_option("--sphere-ratio", opt.hbvh.sphereAreaRatio, "HbvhBuildSettings::sphereAreaRatio (0 = plain AABB)");
+  app.add_option("--sphere-cost", opt.hbvh.sphereTestCost, "HbvhBuildSettings::sphereTestCost (0 = by area alone)");
   app.add_option("--leaf", opt.hbvh.maxLeafSize, "HbvhBuildSettings::maxLeafSize")->check(CLI::Range(1, 64));
   app.add_option("--bins", opt.hbvh.binCount, "HbvhBuildSettings::binCount")->check(CLI::Range(2, 256));
   app.add_option("--traversal-cost", opt.hbvh.traversalCost, "HbvhBuildSettings::traversalCost")

@@ -82,6 +82,9 @@ struct BuildNode {
   /// No vertex of the subtree lies farther than this from box.center(): exact at leaves, from
   /// the children's bounds above (Builder::reach), for the bounding spheres.
   float reach = 0.0f;
+  /// SAH cost of the subtree once a ray is inside its box (leaf tests and node visits, in
+  /// HbvhBuildSettings' cost units): what a tighter bound around it can save.
+  float cost = 0.0f;
   uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
   BuildNode *left = nullptr, *right = nullptr;  // in the builder's arena
   bool leaf() const { return !left; }
@@ -186,6 +189,7 @@ public:
     if (count == 1 || (!mustSplit && (depth >= kMaxDepth || leafCost <= bestCost))) {
       if (m_progress) m_progress->advance(count);
       node->reach = leafReach(*node);
+      node->cost = leafCost;
       return node;
     }
     Range left, right;
@@ -203,6 +207,10 @@ public:
       node->right = build(right, depth + 1);
     }
     node->reach = std::max(reach(*node, *node->left), reach(*node, *node->right));
+    const float area = node->box.area();
+    node->cost = m_s.traversalCost + (area > 0.0f ? (node->left->box.area() * node->left->cost +
+                                                     node->right->box.area() * node->right->cost) / area
+                                                  : node->left->cost + node->right->cost);
     return node;
   }
 
@@ -537,11 +545,18 @@ struct Hbvh::Flattener {
   }
 
   /// A sphere centred on the box, of radius the subtree's reach (BuildNode::reach: the farthest
-  /// vertex at a leaf, a bound from the children's above), when its surface area is below
-  /// sphereAreaRatio times the box's. A box touched on both faces of its widest axis needs a
-  /// sphere of diameter >= that extent, so most boxes are rejected at once.
+  /// vertex at a leaf, a bound from the children's above), kept where the SAH expects it to pay:
+  /// a ray that reaches the child's box then also tests the sphere (sphereTestCost) and enters
+  /// the subtree (its cost) only when it passes both, about as often as the smaller of the two
+  /// areas says (Cauchy's formula), so the sphere pays when
+  ///   (A_box - A_sphere) cost > A_box sphereTestCost,
+  /// and never where its area is not below sphereAreaRatio times the box's. A box touched on
+  /// both faces of its widest axis needs a sphere of diameter >= that extent, so most boxes are
+  /// rejected at once.
   bool fitSphere(const BuildNode& n, Sphere& out) const {
-    const float ratio = bvh.m_settings.sphereAreaRatio;
+    const HbvhBuildSettings& s = bvh.m_settings;
+    float ratio = s.sphereAreaRatio;
+    if (s.sphereTestCost > 0.0f) ratio = std::min(ratio, 1.0f - s.sphereTestCost / std::max(n.cost, 1e-30f));
     if (!(ratio > 0.0f)) return false;
     const float boxArea = n.box.area();
     const float widest = maxComponent(n.box.diagonal());
@@ -598,6 +613,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   static_assert(sizeof(LeafUnit) == sizeof(Triangle4) && sizeof(LeafUnit) == 160, "a leaf unit is a packet");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
+  if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
   Builder builder(s, positions, triangles, progress);

@@ -133,8 +133,12 @@ std::vector<Variant> variants() {
     return [=](const Soup& s) {
       HbvhBuildSettings settings;
       settings.sphereAreaRatio = ratio;
+      settings.sphereTestCost = 0.0f;  // by area alone: spheres wherever the ratio allows
       settings.maxLeafSize = leaf;
       auto bvh = std::make_unique<Hbvh>(s.pos, s.tris, settings);
+      if (ratio > 1.0f && s.tris.size() > 8) {
+        EXPECT_GT(bvh->stats().sphereNodes, 0u) << s.name;
+      }
       bvh->setSimd(simd);
       return std::unique_ptr<Accel>(std::move(bvh));
     };
@@ -355,6 +359,7 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
     for (float ratio : {1.0f, 100.0f}) {
       HbvhBuildSettings settings;
       settings.sphereAreaRatio = ratio;
+      settings.sphereTestCost = 0.0f;
       Hbvh avx(s.pos, s.tris, settings), sse(s.pos, s.tris, settings);
       avx.setSimd(Hbvh::Simd::Avx2);
       sse.setSimd(Hbvh::Simd::Sse42);
@@ -374,6 +379,31 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
       EXPECT_GT(hits, 5000) << s.name;
     }
   }
+}
+
+TEST(Hbvh, SpheresAreKeptWhereTheSahSaysTheyPay) {
+  // A sphere is kept only where (A_box - A_sphere) * subtree cost > A_box * sphereTestCost:
+  // free tests keep every sphere the area ratio allows, dearer ones fewer, and one dearer than
+  // any subtree none; the trees are the same but for their spheres.
+  const Soup s = sphereSoup(4);
+  const auto spheres = [&](float ratio, float cost) {
+    HbvhBuildSettings settings;
+    settings.sphereAreaRatio = ratio;
+    settings.sphereTestCost = cost;
+    const Hbvh bvh(s.pos, s.tris, settings);
+    return std::make_pair(bvh.stats().sphereNodes, bvh.stats().nodes);
+  };
+  const auto byArea = spheres(100.0f, 0.0f), cheap = spheres(100.0f, 0.001f), dearer = spheres(100.0f, 0.05f),
+             dear = spheres(100.0f, 1e6f);
+  EXPECT_GT(byArea.first, cheap.first);  // a cost at all: only spheres smaller than their box
+  EXPECT_GT(cheap.first, dearer.first);
+  EXPECT_GT(dearer.first, 0u);
+  EXPECT_EQ(dear.first, 0u);
+  EXPECT_EQ(byArea.second, dear.second);
+  EXPECT_EQ(spheres(0.0f, 0.0f).first, 0u);  // ratio 0: a plain BVH whatever the cost
+  HbvhBuildSettings bad;
+  bad.sphereTestCost = -1.0f;
+  EXPECT_THROW(Hbvh(s.pos, s.tris, bad), SettingsError);
 }
 
 TEST(Hbvh, PacketRayConstantsAreTheWatertightRays) {

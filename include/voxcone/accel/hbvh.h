@@ -1,7 +1,8 @@
 #pragma once
 /// \file hbvh.h
 /// The hybrid bounding volume hierarchy (HBVH): a binned-SAH BVH over triangles whose nodes keep
-/// an AABB and, where it fits tighter, a bounding sphere; a ray must pass both to enter a node.
+/// an AABB and, where the SAH expects it to pay for its test, a bounding sphere; a ray must pass
+/// both to enter a node.
 /// Built binary, then collapsed to eight children per node whose boxes are tested together: with
 /// one AVX2 register per plane where the CPU has it, as two SSE halves where not (the layout of
 /// Embree's BVH8; the kernel is chosen at run time, so one binary runs on any x86-64).
@@ -29,10 +30,14 @@ struct HbvhBuildSettings {
   /// 47.7 MiB, rays 1.00-1.07x as fast on AVX2 and 0.97-1.2x on SSE 4.2. The same tree on every
   /// machine whatever kernel it runs.
   int leafTestWidth = 8;
-  /// Keep a node's bounding sphere when its surface area is below this fraction of the AABB's
-  /// (surface area is what decides how often a random ray enters a convex volume; Cauchy's
-  /// formula). 0 disables spheres (a plain AABB BVH).
+  /// Never keep a node's bounding sphere unless its surface area is below this fraction of the
+  /// AABB's (surface area is what decides how often a random ray enters a convex volume;
+  /// Cauchy's formula). 0 disables spheres (a plain AABB BVH).
   float sphereAreaRatio = 1.0f;
+  /// SAH cost of testing a child's sphere, in the units of traversalCost: a sphere is kept only
+  /// where the subtree cost it saves exceeds it (hbvh_build.cpp, fitSphere). 0 keeps every
+  /// sphere below sphereAreaRatio (the earlier rule).
+  float sphereTestCost = 1.0f;
   int parallelThreshold = 4096;  ///< subtrees with fewer triangles are built by one task
 };
 
