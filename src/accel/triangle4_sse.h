@@ -21,11 +21,11 @@
 
 namespace voxcone {
 
-/// intersectTriangleWatertight on lane `lane` of `tri` (hbvh_traverse.cpp, compiled for the
-/// baseline instruction set, where it makes the ray's WatertightRay): the packet test's rare
-/// exact-zero edge lanes.
-/// Lanes are rows of floats: coordinate [vtx][axis] of lane i at base[(3 vtx + axis) stride + i]
-/// (a Triangle4: stride 4; an HBVH leaf's packet pair: stride 8).
+/// intersectTriangleWatertight on lane `lane` of the packet at `base` (hbvh_traverse.cpp,
+/// compiled for the baseline instruction set, where it makes the ray's WatertightRay): the
+/// packet test's rare exact-zero edge lanes. Packets are rows of floats: coordinate [vtx][axis]
+/// of lane i at base[(3 vtx + axis) stride + i] (a Triangle4: stride 4; an HBVH leaf's packet
+/// pair: stride 8).
 bool intersectTriangleLane(const float* base, int stride, int lane, const Ray& ray, float tMin, float tMax,
                            float& tOut, float& b1Out, float& b2Out);
 
@@ -107,9 +107,9 @@ struct RayTri4 {
   }
 };
 
-/// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`, `stride`
-/// floats apart; F8 needs stride 8), with the same operations in the same order as the scalar test, so both give
-/// the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
+/// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`,
+/// `stride` floats apart; F8 needs stride 8), with the same operations in the same order as the
+/// scalar test, so both give the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
 /// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
 /// and barycentrics.
 template <class F>
