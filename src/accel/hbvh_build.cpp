@@ -402,14 +402,14 @@ struct Hbvh::Flattener {
   };
   /// Write the leaf of triangles ids[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
   /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes
-  /// (read by closerHitsLeaf / anyHitLeaf in triangle4_sse.h: a pair is 80 floats, ids at row 9).
+  /// (read by closerHitsLeaf / anyHitLeaf in hbvh_traverse_kernel.h).
   void packLeaf(const uint32_t* ids, uint32_t count, float* out) const {
     const uint32_t packets = (count + 3u) / 4u;
     const auto put = [&](float* block, int stride, uint32_t first) {
       for (int lane = 0; lane < stride; ++lane) {
         const bool used = first + lane < count;
         const uint32_t id = used ? ids[first + lane] : 0u;
-        std::memcpy(block + 9 * stride + lane, &id, sizeof id);
+        std::memcpy(block + kIdRow * stride + lane, &id, sizeof id);
         for (int vtx = 0; vtx < 3; ++vtx) {
           const Vec3 v = used ? pos[tris[id][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
           for (int a = 0; a < 3; ++a) block[(3 * vtx + a) * stride + lane] = v[a];
@@ -417,8 +417,9 @@ struct Hbvh::Flattener {
       }
     };
     uint32_t first = 0;
-    for (uint32_t p = 1; p < packets; p += 2, first += 8, out += 80) put(out, 8, first);
-    if (packets & 1u) put(out, 4, first);
+    for (uint32_t p = 1; p < packets; p += 2, first += kPairStride, out += kLeafRows * kPairStride)
+      put(out, kPairStride, first);
+    if (packets & 1u) put(out, kSingleStride, first);
   }
   /// Subtrees of more triangles than the build's parallel threshold are measured and filled
   /// as parallel tasks.
@@ -610,7 +611,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
   static_assert((kLeafBit >> kCountShift) == 64, "packet counts 1..64 must fit between the leaf bit and the slot");
-  static_assert(sizeof(LeafUnit) == sizeof(Triangle4) && sizeof(LeafUnit) == 160, "a leaf unit is a packet");
+  static_assert(sizeof(LeafUnit) == sizeof(Triangle4), "a single packet is laid out as a Triangle4");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");

@@ -13,7 +13,6 @@
 
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 
 #ifndef VOXCONE_ISA
 #define VOXCONE_ISA sse42
@@ -208,63 +207,6 @@ inline bool anyHit(const Triangle4* first, uint32_t count, const Ray& ray, const
   for (uint32_t p = 0; p < count; ++p)
     if (intersectTriangle4(first[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
   return false;
-}
-
-/// An HBVH leaf (hbvh.h, Hbvh::LeafUnit): its packets in pairs, each pair eight lanes per row
-/// (stride 8, ids after the nine rows), and an odd last packet as a Triangle4 (stride 4).
-/// Lanes of a pair are tested together, with AVX2 in one 8-wide test, without in two 4-wide
-/// ones with the same result.
-constexpr int kPairFloats = 80, kPairIds = 72, kSingleIds = 36;
-
-inline uint32_t laneId(const float* block, int idOffset, int lane) {
-  uint32_t id;
-  std::memcpy(&id, block + idOffset + lane, sizeof id);
-  return id;
-}
-
-/// Eight lanes of pair `block`: the mask of those hit, their t and barycentrics.
-inline int intersectPair(const float* block, const Ray& ray, const RayTri4& rt, float tMax, float* t, float* b1,
-                         float* b2) {
-#ifdef __AVX2__
-  return intersectPackets<F8>(block, 8, ray, rt, ray.tMin, tMax, t, b1, b2);
-#else
-  return intersectPackets<F4>(block, 8, ray, rt, ray.tMin, tMax, t, b1, b2) |
-         intersectPackets<F4>(block + 4, 8, ray, rt, ray.tMin, tMax, t + 4, b1 + 4, b2 + 4) << 4;
-#endif
-}
-
-/// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, hit),
-/// a pair at a time against the same tMax, lanes in order. True when one was closer.
-inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float& tMax,
-                           Hit& hit) {
-  bool found = false;
-  const auto take = [&](int mask, const float* block, int idOffset, const float* t, const float* b1,
-                        const float* b2) {
-    for (; mask; mask &= mask - 1) {
-      const int i = __builtin_ctz(static_cast<unsigned>(mask));
-      if (t[i] < tMax) {
-        tMax = t[i];
-        hit = {t[i], laneId(block, idOffset, i), b1[i], b2[i]};
-        found = true;
-      }
-    }
-  };
-  alignas(32) float t[8], b1[8], b2[8];
-  const float* block = leaf;
-  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
-    take(intersectPair(block, ray, rt, tMax, t, b1, b2), block, kPairIds, t, b1, b2);
-  if (packets & 1u)
-    take(intersectPackets<F4>(block, 4, ray, rt, ray.tMin, tMax, t, b1, b2), block, kSingleIds, t, b1, b2);
-  return found;
-}
-
-/// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
-inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float tMax) {
-  alignas(32) float t[8], b1[8], b2[8];
-  const float* block = leaf;
-  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
-    if (intersectPair(block, ray, rt, tMax, t, b1, b2)) return true;
-  return (packets & 1u) && intersectPackets<F4>(block, 4, ray, rt, ray.tMin, tMax, t, b1, b2);
 }
 
 }  // namespace VOXCONE_ISA
