@@ -58,6 +58,9 @@ inline int lessEqualMask(VFloat a, VFloat b) { return _mm_movemask_ps(_mm_cmple_
 /// Per-ray constants of the box test.
 struct RayData {
   VFloat org[3], invDir[3];
+  /// invDir times kSlabScale, for the exit distances: (hi - o) (1/d S) rounds four times, as
+  /// ((hi - o) 1/d) S did, so the widening bounds the same error, with one product less a node.
+  VFloat invDirFar[3];
   // Per axis: byte offsets in a Node of the entry and exit planes (lo or hi by the sign of the
   // direction), so the box test has no branch.
   size_t nearOffset[3], farOffset[3];
@@ -75,6 +78,7 @@ struct RayData {
     for (int a = 0; a < 3; ++a) {
       org[a] = broadcast(r.origin[a]);
       invDir[a] = broadcast(inv[a]);
+      invDirFar[a] = broadcast(inv[a] * kSlabScale);
       const size_t lo = offsetof(Node, lo) + a * sizeof(float[kWidth]);
       const size_t hi = offsetof(Node, hi) + a * sizeof(float[kWidth]);
       nearOffset[a] = (negative >> a) & 1 ? hi : lo;
@@ -98,13 +102,15 @@ struct SphereRay {
 /// into tNearOut[first..] and the mask of those entered, from bit 0.
 inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
-  const auto slab = [&](const size_t* offsets, int a) {
-    return mul(sub(load(reinterpret_cast<const float*>(base + offsets[a])), rd.org[a]), rd.invDir[a]);
+  const auto slab = [&](const size_t* offsets, const VFloat* inv, int a) {
+    return mul(sub(load(reinterpret_cast<const float*>(base + offsets[a])), rd.org[a]), inv[a]);
   };
-  const VFloat tNear = vmax(vmax(tMin, slab(rd.nearOffset, 0)), vmax(slab(rd.nearOffset, 1), slab(rd.nearOffset, 2)));
-  const VFloat tFar = vmin(vmin(slab(rd.farOffset, 0), slab(rd.farOffset, 1)), slab(rd.farOffset, 2));
+  const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
+  const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
+  const VFloat tNear = vmax(vmax(tMin, nearSlab(0)), vmax(nearSlab(1), nearSlab(2)));
+  const VFloat tFar = vmin(vmin(farSlab(0), farSlab(1)), vmin(farSlab(2), tMax));
   store(tNearOut + first, tNear);
-  return lessEqualMask(tNear, vmin(mul(tFar, broadcast(kSlabScale)), tMax));
+  return lessEqualMask(tNear, tFar);
 }
 
 /// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are
@@ -228,6 +234,41 @@ inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, cons
   for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
     if (intersectPair(block, ray, rt, tMax, t, b1, b2)) return true;
   return (packets & 1u) && intersectPackets<F4>(block, kSingleStride, ray, rt, ray.tMin, tMax, t, b1, b2);
+}
+
+#ifdef __AVX2__
+/// Nibble k of kCompress.lanes[m] is the index of the k-th set bit of m: the permutation that
+/// packs the lanes of mask m to the front, in order.
+struct CompressTable {
+  uint32_t lanes[1 << kWidth];
+  constexpr CompressTable() : lanes() {
+    for (int m = 0; m < (1 << kWidth); ++m)
+      for (int i = 0, k = 0; i < kWidth; ++i)
+        if ((m >> i) & 1) lanes[m] |= uint32_t(i) << (4 * k++);
+  }
+};
+constexpr CompressTable kCompress;
+#endif
+
+/// Push the children of n in `mask` onto the stack at sp, in index order, without a branch per
+/// child: one permutation packs them to the front of a register and one store writes all eight
+/// slots (the stack has room for them), of which sp keeps only the mask's.
+inline uint32_t* pushChildren(uint32_t* sp, const Node& n, int mask) {
+#ifdef __AVX2__
+  static_assert(offsetof(Node, child) % 32 == 0 && alignof(Node) % 32 == 0, "a node's refs are one aligned load");
+  // vpermd reads the low three bits of each index: the nibbles need no masking.
+  const __m256i idx = _mm256_srlv_epi32(_mm256_set1_epi32(int(kCompress.lanes[mask])),
+                                        _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
+  const __m256i refs = _mm256_load_si256(reinterpret_cast<const __m256i*>(n.child));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(sp), _mm256_permutevar8x32_epi32(refs, idx));
+  return sp + __builtin_popcount(static_cast<unsigned>(mask));
+#else
+  for (int i = 0; i < kWidth; ++i) {
+    *sp = n.child[i];
+    sp += (mask >> i) & 1;
+  }
+  return sp;
+#endif
 }
 
 /// Stack depth: at most kWidth - 1 entries per level of the path; the 8-wide tree is no deeper
@@ -374,14 +415,8 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
       if (mask == 0) goto pop;
       // Any hit ends the query, so order does not matter: take the first, push the rest.
-      // The others are pushed without a branch per child: every slot is written, and the stack
-      // grows only over those entered.
       cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-      mask &= mask - 1;
-      for (int i = 0; i < kWidth; ++i) {
-        *sp = n.child[i];
-        sp += (mask >> i) & 1;
-      }
+      sp = pushChildren(sp, n, mask & (mask - 1));
     }
     {
       VOXCONE_COUNT(leaves, 1);
