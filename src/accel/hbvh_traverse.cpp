@@ -51,8 +51,23 @@ void Hbvh::setSimd(Simd simd) {
   m_simd = simd;
 }
 
-std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
+namespace {
+
+/// The kernels order distances as integers, which needs tMin >= 0 (hbvh_traverse_kernel.h,
+/// enterBoxes): a ray from before its origin is traced from it, as Embree requires of tnear.
+const Ray& fromOrigin(const Ray& ray, Ray& clamped) {
+  if (!(ray.tMin < 0.0f)) return ray;
+  clamped = ray;
+  clamped.tMin = 0.0f;
+  return clamped;
+}
+
+}  // namespace
+
+std::optional<Hit> Hbvh::intersect(const Ray& r) const {
   if (m_nodes.empty()) return std::nullopt;
+  Ray clamped;
+  const Ray& ray = fromOrigin(r, clamped);
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
@@ -60,8 +75,10 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   return sse42::hbvhIntersect(arrays, ray);
 }
 
-bool Hbvh::occluded(const Ray& ray, float tMax) const {
+bool Hbvh::occluded(const Ray& r, float tMax) const {
   if (m_nodes.empty()) return false;
+  Ray clamped;
+  const Ray& ray = fromOrigin(r, clamped);
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);

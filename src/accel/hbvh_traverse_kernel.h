@@ -40,9 +40,15 @@ inline VFloat load(const float* p) { return _mm256_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm256_store_ps(p, a); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
-inline VFloat vmin(VFloat a, VFloat b) { return _mm256_min_ps(a, b); }
-inline VFloat vmax(VFloat a, VFloat b) { return _mm256_max_ps(a, b); }
-inline int lessEqualMask(VFloat a, VFloat b) { return _mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ)); }
+inline VFloat imin(VFloat a, VFloat b) {
+  return _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
+}
+inline VFloat imax(VFloat a, VFloat b) {
+  return _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
+}
+inline int iGreaterMask(VFloat a, VFloat b) {
+  return _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))));
+}
 #else
 using VFloat = __m128;  ///< one plane of four children (a node takes two)
 inline VFloat broadcast(float x) { return _mm_set1_ps(x); }
@@ -50,9 +56,11 @@ inline VFloat load(const float* p) { return _mm_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
-inline VFloat vmin(VFloat a, VFloat b) { return _mm_min_ps(a, b); }
-inline VFloat vmax(VFloat a, VFloat b) { return _mm_max_ps(a, b); }
-inline int lessEqualMask(VFloat a, VFloat b) { return _mm_movemask_ps(_mm_cmple_ps(a, b)); }
+inline VFloat imin(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_min_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
+inline VFloat imax(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_max_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
+inline int iGreaterMask(VFloat a, VFloat b) {
+  return _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(a), _mm_castps_si128(b))));
+}
 #endif
 
 /// Per-ray constants of the box test.
@@ -100,6 +108,12 @@ struct SphereRay {
 
 /// The slab test of the children from `first` on, one register wide: their entry distances
 /// into tNearOut[first..] and the mask of those entered, from bit 0.
+/// Distances are ordered as 32-bit integers (one cycle a minimum, against four for floats; as
+/// Embree's kernels do), which orders floats of which one at least is not negative: the entry
+/// distance is the largest of the planes' and tMin >= 0 (Hbvh::intersect clamps it), so it is
+/// the float maximum; an exit distance is the float minimum where all are >= 0, and a negative
+/// one where any is, which no entry distance is at or below (a box left at t = -0, where -0
+/// orders below +0, holds nothing in the open interval (tMin, tMax)).
 inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
   const auto slab = [&](const size_t* offsets, const VFloat* inv, int a) {
@@ -107,10 +121,10 @@ inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, 
   };
   const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
   const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
-  const VFloat tNear = vmax(vmax(tMin, nearSlab(0)), vmax(nearSlab(1), nearSlab(2)));
-  const VFloat tFar = vmin(vmin(farSlab(0), farSlab(1)), vmin(farSlab(2), tMax));
+  const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
+  const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
   store(tNearOut + first, tNear);
-  return lessEqualMask(tNear, tFar);
+  return ~iGreaterMask(tNear, tFar) & ((1 << int(sizeof(VFloat) / sizeof(float))) - 1);
 }
 
 /// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are

@@ -349,6 +349,38 @@ TEST(Accel, EmptyAndDegenerateInput) {
   EXPECT_THROW(buildAccel("octree", std::vector<Vec3>{}, std::vector<UVec3>{}), SettingsError);
 }
 
+TEST(Hbvh, RaysFromBeforeTheirOriginAreTracedFromIt) {
+  // The kernels order box distances as integers, which holds for tMin >= 0: a negative tMin
+  // is traced from the origin (as Embree's tnear), in both kernels, closest hit and occlusion.
+  // Squares at z = -1 (behind the origin) and z = 2, 3 (in front), the ray along +z.
+  std::vector<Vec3> pos;
+  std::vector<UVec3> tris;
+  for (float z : {-1.0f, 2.0f, 3.0f}) {
+    const uint32_t b = uint32_t(pos.size());
+    for (Vec3 p : {Vec3(-1, -1, z), Vec3(1, -1, z), Vec3(1, 1, z), Vec3(-1, 1, z)}) pos.push_back(p);
+    tris.push_back({b, b + 1, b + 2});
+    tris.push_back({b, b + 2, b + 3});
+  }
+  std::vector<Hbvh::Simd> kernels = {Hbvh::Simd::Sse42};
+  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) kernels.push_back(Hbvh::hostSimd());
+  for (Hbvh::Simd simd : kernels) {
+    Hbvh bvh(pos, tris);
+    bvh.setSimd(simd);
+    Ray r;
+    r.origin = Vec3(0.1f, 0.2f, 0.0f);
+    r.dir = Vec3(0, 0, 1);
+    r.tMin = -5.0f;
+    const auto h = bvh.intersect(r);
+    ASSERT_TRUE(h) << Hbvh::simdName(simd);
+    EXPECT_FLOAT_EQ(h->t, 2.0f) << Hbvh::simdName(simd);
+    EXPECT_FALSE(bvh.occluded(r, 1.5f)) << Hbvh::simdName(simd);  // only the square behind lies before 1.5
+    EXPECT_TRUE(bvh.occluded(r, 2.5f)) << Hbvh::simdName(simd);
+    r.dir = Vec3(0, 0, -1);  // towards the square behind: in front now
+    ASSERT_TRUE(bvh.intersect(r)) << Hbvh::simdName(simd);
+    EXPECT_FLOAT_EQ(bvh.intersect(r)->t, 1.0f) << Hbvh::simdName(simd);
+  }
+}
+
 TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
   // The AVX2 and SSE kernels run the same operations in the same order, so renders do not
   // depend on the machine's instruction set: every hit, distance and barycentric equal.
