@@ -7,6 +7,7 @@
 
 #include "voxcone/core/error.h"
 
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 
@@ -53,10 +54,11 @@ void Hbvh::setSimd(Simd simd) {
 
 namespace {
 
-/// The kernels order distances as integers, which needs tMin >= 0 (hbvh_traverse_kernel.h,
-/// enterBoxes): a ray from before its origin is traced from it, as Embree requires of tnear.
+/// The kernels order distances as integers, which needs tMin >= +0 (hbvh_traverse_kernel.h,
+/// enterBoxes; -0 orders below every negative float): a ray from before its origin is traced
+/// from it, as Embree requires of tnear.
 const Ray& fromOrigin(const Ray& ray, Ray& clamped) {
-  if (!(ray.tMin < 0.0f)) return ray;
+  if (!std::signbit(ray.tMin)) return ray;
   clamped = ray;
   clamped.tMin = 0.0f;
   return clamped;
