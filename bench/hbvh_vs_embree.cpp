@@ -184,24 +184,28 @@ Tracer embreeTracer(const std::string& name, RTCScene scene) {
   return t;
 }
 
+/// Rays a tracer takes at a time (a TBB task; a turn of traceInterleaved).
+constexpr size_t kBlock = 4096;
+
+size_t blockCount(const std::vector<Ray>& rays) { return (rays.size() + kBlock - 1) / kBlock; }
+
+/// Trace block b of the rays into out.
+void traceBlock(const BlockFn& fn, const std::vector<Ray>& rays, std::vector<float>& out, size_t b) {
+  const size_t begin = b * kBlock, end = std::min(rays.size(), begin + kBlock);
+  fn(rays.data() + begin, out.data() + begin, end - begin);
+}
+
 /// Trace all rays in blocks; one thread runs them in order, more threads take blocks from TBB.
 /// Returns wall seconds.
 double traceAll(const BlockFn& fn, const std::vector<Ray>& rays, std::vector<float>& out, int threads) {
-  constexpr size_t kBlock = 4096;
   out.assign(rays.size(), 0.0f);
-  const size_t nBlocks = (rays.size() + kBlock - 1) / kBlock;
+  const size_t nBlocks = blockCount(rays);
   Timer timer;
   if (threads == 1) {
-    for (size_t b = 0; b < nBlocks; ++b) {
-      const size_t begin = b * kBlock, end = std::min(rays.size(), begin + kBlock);
-      fn(rays.data() + begin, out.data() + begin, end - begin);
-    }
+    for (size_t b = 0; b < nBlocks; ++b) traceBlock(fn, rays, out, b);
   } else {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, nBlocks, 1), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t b = r.begin(); b != r.end(); ++b) {
-        const size_t begin = b * kBlock, end = std::min(rays.size(), begin + kBlock);
-        fn(rays.data() + begin, out.data() + begin, end - begin);
-      }
+      for (size_t b = r.begin(); b != r.end(); ++b) traceBlock(fn, rays, out, b);
     });
   }
   const double s = timer.seconds();
@@ -216,19 +220,15 @@ double traceAll(const BlockFn& fn, const std::vector<Ray>& rays, std::vector<flo
 /// other gave ratios that moved by 0.1 between runs of the same binaries. Seconds per tracer.
 std::vector<double> traceInterleaved(const std::vector<const BlockFn*>& fns, const std::vector<Ray>& rays,
                                      std::vector<float>& out) {
-  constexpr size_t kBlock = 4096;
   out.assign(rays.size(), 0.0f);
   std::vector<double> seconds(fns.size(), 0.0);
-  const size_t nBlocks = (rays.size() + kBlock - 1) / kBlock;
-  for (size_t b = 0; b < nBlocks; ++b) {
-    const size_t begin = b * kBlock, end = std::min(rays.size(), begin + kBlock);
+  for (size_t b = 0; b < blockCount(rays); ++b)
     for (size_t j = 0; j < fns.size(); ++j) {
       const size_t k = (b + j) % fns.size();
       Timer timer;
-      (*fns[k])(rays.data() + begin, out.data() + begin, end - begin);
+      traceBlock(*fns[k], rays, out, b);
       seconds[k] += timer.seconds();
     }
-  }
   benchmark::DoNotOptimize(out.data());
   benchmark::ClobberMemory();
   return seconds;
@@ -359,12 +359,11 @@ struct SetResult {
 };
 
 /// The HBVH's rays per second over Embree MEDIUM's: the median of the repetitions' ratios, each
-/// measured side by side (traceInterleaved), or the ratio of the medians where the two were not
-/// timed in the same repetitions.
+/// measured side by side (traceInterleaved on one thread); 0 where one was not timed (--only).
 double hbvhRatio(const SetResult& r) {
   const std::vector<double>& h = r.seconds[0];
   const std::vector<double>& e = r.seconds[1];
-  if (h.size() != e.size() || h.empty()) return h.empty() || e.empty() ? 0.0 : median(e) / median(h);
+  if (h.empty() || h.size() != e.size()) return 0.0;
   std::vector<double> ratios;
   for (size_t i = 0; i < h.size(); ++i) ratios.push_back(e[i] / h[i]);
   return median(ratios);

@@ -55,21 +55,18 @@ void Hbvh::setSimd(Simd simd) {
 namespace {
 
 /// The kernels order distances as integers, which needs tMin >= +0 (hbvh_traverse_kernel.h,
-/// enterBoxes; -0 orders below every negative float): a ray from before its origin is traced
-/// from it, as Embree requires of tnear.
-const Ray& fromOrigin(const Ray& ray, Ray& clamped) {
-  if (!std::signbit(ray.tMin)) return ray;
-  clamped = ray;
-  clamped.tMin = 0.0f;
-  return clamped;
+/// enterBoxes; -0 orders below every negative float): a ray from before its origin (signbit set)
+/// is traced from it, as Embree requires of tnear.
+Ray fromOrigin(Ray ray) {
+  ray.tMin = 0.0f;
+  return ray;
 }
 
 }  // namespace
 
-std::optional<Hit> Hbvh::intersect(const Ray& r) const {
+std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
-  Ray clamped;
-  const Ray& ray = fromOrigin(r, clamped);
+  if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
@@ -77,10 +74,9 @@ std::optional<Hit> Hbvh::intersect(const Ray& r) const {
   return sse42::hbvhIntersect(arrays, ray);
 }
 
-bool Hbvh::occluded(const Ray& r, float tMax) const {
+bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
-  Ray clamped;
-  const Ray& ray = fromOrigin(r, clamped);
+  if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);

@@ -46,8 +46,9 @@ inline VFloat imin(VFloat a, VFloat b) {
 inline VFloat imax(VFloat a, VFloat b) {
   return _mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
 }
-inline int iGreaterMask(VFloat a, VFloat b) {
-  return _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))));
+/// Lanes where a <= b, ordered as integers.
+inline int lessEqualMask(VFloat a, VFloat b) {
+  return 0xff ^ _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))));
 }
 #else
 using VFloat = __m128;  ///< one plane of four children (a node takes two)
@@ -58,8 +59,8 @@ inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
 inline VFloat imin(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_min_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
 inline VFloat imax(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_max_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
-inline int iGreaterMask(VFloat a, VFloat b) {
-  return _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(a), _mm_castps_si128(b))));
+inline int lessEqualMask(VFloat a, VFloat b) {
+  return 0xf ^ _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(a), _mm_castps_si128(b))));
 }
 #endif
 
@@ -124,7 +125,7 @@ inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, 
   const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
   const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
   store(tNearOut + first, tNear);
-  return ~iGreaterMask(tNear, tFar) & ((1 << int(sizeof(VFloat) / sizeof(float))) - 1);
+  return lessEqualMask(tNear, tFar);
 }
 
 /// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are

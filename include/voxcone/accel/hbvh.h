@@ -100,8 +100,8 @@ public:
   /// Build over a scene's triangles.
   explicit Hbvh(const Scene& scene, const HbvhBuildSettings& settings = {}, Progress* progress = nullptr);
 
-  /// A ray with tMin < 0 is traced from its origin (tMin 0), as Embree's tnear: the kernels
-  /// order box distances as integers, which needs them from 0 on.
+  /// Both queries trace a ray with tMin < 0 (or -0) from its origin (tMin +0), as Embree does
+  /// tnear: the kernels order box distances as integers, which needs them from +0 on.
   std::optional<Hit> intersect(const Ray& ray) const override;
   bool occluded(const Ray& ray, float tMax) const override;
   using Accel::occluded;
