@@ -84,9 +84,19 @@ inline F8 operator>(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; 
 inline F8 operator>=(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
 #endif
 
+/// WatertightRay's kx, ky by kz and the sign of dir[kz]: nibble 2 kz + negative is kx | ky << 2.
+constexpr uint32_t packedNextAxes() {
+  constexpr int kNext[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
+  uint32_t packed = 0;
+  for (int z = 0; z < 3; ++z)
+    for (int neg = 0; neg < 2; ++neg) packed |= uint32_t(kNext[z][neg][0] | kNext[z][neg][1] << 2) << (4 * (2 * z + neg));
+  return packed;
+}
+
 /// Per-ray constants of the packet test: WatertightRay's permutation and shear (the same values;
-/// made here, without branches, rather than by WatertightRay's inline constructor, which a
-/// kernel TU would compile for its own instruction set and the linker might keep for all).
+/// made here rather than by WatertightRay's inline constructor, which a kernel TU would compile
+/// for its own instruction set and the linker might keep for all). Without a branch: the axis
+/// choice follows the ray's direction, which a branch predictor cannot guess for incoherent rays.
 struct RayTri4 {
   int kx, ky, kz;
   float sx, sy, sz;
@@ -94,12 +104,14 @@ struct RayTri4 {
   explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
-    kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);  // maxDimension
-    // kx, ky follow kz cyclically, swapped where dir[kz] < 0 (winding): [kz][negative].
-    static constexpr int8_t kNext[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
+    // maxDimension: ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2), as flags.
+    const int xy = ax > ay, xz = ax > az, yz = ay > az;
+    kz = 2 - 2 * (xy & xz) - ((xy ^ 1) & yz);
+    // kx, ky follow kz cyclically, swapped where dir[kz] < 0 (winding).
     const int neg = d[kz] < 0.0f;
-    kx = kNext[kz][neg][0];
-    ky = kNext[kz][neg][1];
+    const uint32_t next = packedNextAxes() >> (4 * (2 * kz + neg));
+    kx = int(next & 3u);
+    ky = int((next >> 2) & 3u);
     sz = 1.0f / d[kz];
     sx = d[kx] * sz;
     sy = d[ky] * sz;
