@@ -101,6 +101,7 @@ struct RayTri4 {
   int kx, ky, kz;
   float sx, sy, sz;
   float org[3];
+  RayTri4() = default;  ///< unset (the HBVH makes it at a ray's first leaf)
   explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
