@@ -71,28 +71,39 @@ struct RayData {
   /// ((hi - o) 1/d) S did, so the widening bounds the same error, with one product less a node.
   VFloat invDirFar[3];
   // Per axis: byte offsets in a Node of the entry and exit planes (lo or hi by the sign of the
-  // direction), so the box test has no branch.
-  size_t nearOffset[3], farOffset[3];
+  // direction), so the box test has no branch; [3] unused.
+  alignas(32) int64_t nearOffset[4], farOffset[4];
   explicit RayData(const Ray& r) {
     // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance; the three
     // reciprocals in one division (each correctly rounded, as three scalar ones).
-    alignas(16) float inv[4];
+    alignas(16) float inv[4], invFar[4];
     const __m128 d = _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 1.0f);
     const __m128 signBit = _mm_set1_ps(-0.0f);
     const __m128 tiny = _mm_or_ps(_mm_and_ps(d, signBit), _mm_set1_ps(1e-30f));
     const __m128 small = _mm_cmplt_ps(_mm_andnot_ps(signBit, d), _mm_set1_ps(1e-30f));
     const __m128 safe = _mm_or_ps(_mm_and_ps(small, tiny), _mm_andnot_ps(small, d));
-    _mm_store_ps(inv, _mm_div_ps(_mm_set1_ps(1.0f), safe));
-    const int negative = _mm_movemask_ps(safe);
+    const __m128 invV = _mm_div_ps(_mm_set1_ps(1.0f), safe);
+    _mm_store_ps(inv, invV);
+    _mm_store_ps(invFar, _mm_mul_ps(invV, _mm_set1_ps(kSlabScale)));
     for (int a = 0; a < 3; ++a) {
       org[a] = broadcast(r.origin[a]);
       invDir[a] = broadcast(inv[a]);
-      invDirFar[a] = broadcast(inv[a] * kSlabScale);
-      const size_t lo = offsetof(Node, lo) + a * sizeof(float[kWidth]);
-      const size_t hi = offsetof(Node, hi) + a * sizeof(float[kWidth]);
-      nearOffset[a] = (negative >> a) & 1 ? hi : lo;
-      farOffset[a] = (negative >> a) & 1 ? lo : hi;
+      invDirFar[a] = broadcast(invFar[a]);
     }
+    // The offsets four lanes at once: the sign bit of each component swaps lo and hi.
+    constexpr int kLo = offsetof(Node, lo), kHi = offsetof(Node, hi), kPlane = sizeof(float[kWidth]);
+    const __m128i swap = _mm_and_si128(_mm_srai_epi32(_mm_castps_si128(safe), 31), _mm_set1_epi32(kHi - kLo));
+    const __m128i nearV = _mm_add_epi32(_mm_setr_epi32(kLo, kLo + kPlane, kLo + 2 * kPlane, 0), swap);
+    const __m128i farV = _mm_sub_epi32(_mm_setr_epi32(kHi, kHi + kPlane, kHi + 2 * kPlane, 0), swap);
+#ifdef __AVX2__
+    _mm256_store_si256(reinterpret_cast<__m256i*>(nearOffset), _mm256_cvtepi32_epi64(nearV));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(farOffset), _mm256_cvtepi32_epi64(farV));
+#else
+    _mm_store_si128(reinterpret_cast<__m128i*>(nearOffset), _mm_cvtepi32_epi64(nearV));
+    _mm_store_si128(reinterpret_cast<__m128i*>(nearOffset + 2), _mm_cvtepi32_epi64(_mm_unpackhi_epi64(nearV, nearV)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(farOffset), _mm_cvtepi32_epi64(farV));
+    _mm_store_si128(reinterpret_cast<__m128i*>(farOffset + 2), _mm_cvtepi32_epi64(_mm_unpackhi_epi64(farV, farV)));
+#endif
   }
 };
 
@@ -117,7 +128,7 @@ struct SphereRay {
 /// orders below +0, holds nothing in the open interval (tMin, tMax)).
 inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
-  const auto slab = [&](const size_t* offsets, const VFloat* inv, int a) {
+  const auto slab = [&](const int64_t* offsets, const VFloat* inv, int a) {
     return mul(sub(load(reinterpret_cast<const float*>(base + offsets[a])), rd.org[a]), inv[a]);
   };
   const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
