@@ -71,8 +71,8 @@ struct RayData {
   /// ((hi - o) 1/d) S did, so the widening bounds the same error, with one product less a node.
   VFloat invDirFar[3];
   // Per axis: byte offsets in a Node of the entry and exit planes (lo or hi by the sign of the
-  // direction), so the box test has no branch; [3] unused.
-  alignas(32) int64_t nearOffset[4], farOffset[4];
+  // direction), so the box test has no branch.
+  int64_t nearOffset[3], farOffset[3];
   explicit RayData(const Ray& r) {
     // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance; the three
     // reciprocals in one division (each correctly rounded, as three scalar ones).
@@ -90,20 +90,16 @@ struct RayData {
       invDir[a] = broadcast(inv[a]);
       invDirFar[a] = broadcast(invFar[a]);
     }
-    // The offsets four lanes at once: the sign bit of each component swaps lo and hi.
-    constexpr int kLo = offsetof(Node, lo), kHi = offsetof(Node, hi), kPlane = sizeof(float[kWidth]);
-    const __m128i swap = _mm_and_si128(_mm_srai_epi32(_mm_castps_si128(safe), 31), _mm_set1_epi32(kHi - kLo));
-    const __m128i nearV = _mm_add_epi32(_mm_setr_epi32(kLo, kLo + kPlane, kLo + 2 * kPlane, 0), swap);
-    const __m128i farV = _mm_sub_epi32(_mm_setr_epi32(kHi, kHi + kPlane, kHi + 2 * kPlane, 0), swap);
-#ifdef __AVX2__
-    _mm256_store_si256(reinterpret_cast<__m256i*>(nearOffset), _mm256_cvtepi32_epi64(nearV));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(farOffset), _mm256_cvtepi32_epi64(farV));
-#else
-    _mm_store_si128(reinterpret_cast<__m128i*>(nearOffset), _mm_cvtepi32_epi64(nearV));
-    _mm_store_si128(reinterpret_cast<__m128i*>(nearOffset + 2), _mm_cvtepi32_epi64(_mm_unpackhi_epi64(nearV, nearV)));
-    _mm_store_si128(reinterpret_cast<__m128i*>(farOffset), _mm_cvtepi32_epi64(farV));
-    _mm_store_si128(reinterpret_cast<__m128i*>(farOffset + 2), _mm_cvtepi32_epi64(_mm_unpackhi_epi64(farV, farV)));
-#endif
+    // The sign bit of each component swaps lo and hi. Scalar: from a vector, GCC kept the
+    // offsets in one and extracted them in every box test.
+    const int negative = _mm_movemask_ps(safe);
+    for (int a = 0; a < 3; ++a) {
+      const int64_t lo = offsetof(Node, lo) + a * sizeof(float[kWidth]);
+      const int64_t hi = offsetof(Node, hi) + a * sizeof(float[kWidth]);
+      const int64_t swap = -int64_t((negative >> a) & 1) & (hi - lo);
+      nearOffset[a] = lo + swap;
+      farOffset[a] = hi - swap;
+    }
   }
 };
 
