@@ -20,6 +20,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <new>
 
 namespace voxcone {
 namespace VOXCONE_ISA {
@@ -183,14 +184,16 @@ inline int enterChildren(const Node& n, const Vec4* spheres, const Ray& ray, con
 /// The packet test's constants, made at a ray's first leaf: most primary rays (62% miss the
 /// dragon) never reach one.
 struct LeafRay {
-  RayTri4 rt;
+  // Raw storage: a default-constructed RayTriLanes member made GCC warn (maybe-uninitialized)
+  // wherever a leaf test reads it behind the flag.
+  alignas(RayTriLanes) unsigned char storage[sizeof(RayTriLanes)];
   bool made = false;
-  const RayTri4& get(const Ray& ray) {
+  const RayTriLanes& get(const Ray& ray) {
     if (!made) {
-      rt = RayTri4(ray);
+      new (storage) RayTriLanes(ray);
       made = true;
     }
-    return rt;
+    return *std::launder(reinterpret_cast<const RayTriLanes*>(storage));
   }
 };
 
@@ -237,19 +240,19 @@ inline uint32_t laneId(const float* block, int stride, int lane) {
 }
 
 /// Eight lanes of pair `block`: the mask of those hit, their t and barycentrics.
-inline int intersectPair(const float* block, const Ray& ray, const RayTri4& rt, float tMax, float* t, float* b1,
+inline int intersectPair(const float* block, const Ray& ray, const RayTriLanes& rl, float tMax, float* t, float* b1,
                          float* b2) {
 #ifdef __AVX2__
-  return intersectPackets<F8>(block, kPairStride, ray, rt, ray.tMin, tMax, t, b1, b2);
+  return intersectPackets<F8>(block, kPairStride, ray, rl, tMax, t, b1, b2);
 #else
-  return intersectPackets<F4>(block, kPairStride, ray, rt, ray.tMin, tMax, t, b1, b2) |
-         intersectPackets<F4>(block + 4, kPairStride, ray, rt, ray.tMin, tMax, t + 4, b1 + 4, b2 + 4) << 4;
+  return intersectPackets<F4>(block, kPairStride, ray, rl, tMax, t, b1, b2) |
+         intersectPackets<F4>(block + 4, kPairStride, ray, rl, tMax, t + 4, b1 + 4, b2 + 4) << 4;
 #endif
 }
 
 /// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, hit),
 /// a pair at a time against the same tMax, lanes in order. True when one was closer.
-inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float& tMax,
+inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
                            Hit& hit) {
   bool found = false;
   const auto take = [&](int mask, const float* block, int stride, const float* t, const float* b1,
@@ -266,20 +269,20 @@ inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, 
   alignas(32) float t[8], b1[8], b2[8];
   const float* block = leaf;
   for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
-    take(intersectPair(block, ray, rt, tMax, t, b1, b2), block, kPairStride, t, b1, b2);
+    take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride, t, b1, b2);
   if (packets & 1u)
-    take(intersectPackets<F4>(block, kSingleStride, ray, rt, ray.tMin, tMax, t, b1, b2), block, kSingleStride, t,
+    take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride, t,
          b1, b2);
   return found;
 }
 
 /// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
-inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTri4& rt, float tMax) {
+inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float tMax) {
   alignas(32) float t[8], b1[8], b2[8];
   const float* block = leaf;
   for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
-    if (intersectPair(block, ray, rt, tMax, t, b1, b2)) return true;
-  return (packets & 1u) && intersectPackets<F4>(block, kSingleStride, ray, rt, ray.tMin, tMax, t, b1, b2);
+    if (intersectPair(block, ray, rl, tMax, t, b1, b2)) return true;
+  return (packets & 1u) && intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2);
 }
 
 #ifdef __AVX2__

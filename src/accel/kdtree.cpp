@@ -229,7 +229,7 @@ namespace {
 
 using sse42::anyHit;  // the kd-tree traverses with the baseline kernels only
 using sse42::closerHits;
-using sse42::RayTri4;
+using sse42::RayTriLanes;
 
 struct KdTodo {
   uint32_t node;
@@ -244,7 +244,7 @@ bool KdTree::traverse(const Ray& ray, float tMax, Hit& hit) const {
   for (int a = 0; a < 3; ++a) invDir[a] = 1.0f / ray.dir[a];
   float t0, t1;
   if (!clipToBounds(ray, invDir, tMax, t0, t1)) return false;
-  const RayTri4 rt(ray);
+  const RayTriLanes rl(ray);
   KdTodo stack[kStackSize];
   int sp = 0;
   bool found = false;
@@ -269,9 +269,9 @@ bool KdTree::traverse(const Ray& ray, float tMax, Hit& hit) const {
     }
     const Node& leaf = m_nodes[cur];
     if (kAnyHit) {
-      if (anyHit(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rt, tMax)) return true;
+      if (anyHit(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rl, tMax)) return true;
     } else {
-      found |= closerHits(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rt, tMax, hit);
+      found |= closerHits(m_tris.data() + leaf.firstPacket, leaf.packetCount(), ray, rl, tMax, hit);
     }
     // The remaining cells lie further along the ray, nearest on top: none holds a closer hit
     // once the nearest starts beyond the closest one.

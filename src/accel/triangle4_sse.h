@@ -119,22 +119,48 @@ struct RayTri4 {
   }
 };
 
+/// RayTri4 spread over eight lanes, with the byte offsets of the rows its axes select: what the
+/// packet test reads of a ray, made once a ray (the HBVH: at its first leaf), so that a leaf test
+/// loads it rather than broadcasting seven values and scaling three axes (GCC broadcast them once
+/// a leaf and spilled them to the stack).
+struct alignas(32) RayTriLanes {
+  enum Row { kOrgX, kOrgY, kOrgZ, kSx, kSy, kSz, kTMin, kRows };
+  float lanes[kRows][8];  ///< origin[kx], origin[ky], origin[kz], sx, sy, sz, tMin
+  /// Byte offsets of rows kx, ky, kz in a packet of 4 ([0]) or 8 ([1]) floats a row.
+  int64_t rowBytes[2][3];
+  explicit RayTriLanes(const Ray& r) {
+    const RayTri4 rt(r);
+    const int k[3] = {rt.kx, rt.ky, rt.kz};
+    const float v[kRows] = {rt.org[k[0]], rt.org[k[1]], rt.org[k[2]], rt.sx, rt.sy, rt.sz, r.tMin};
+    for (int i = 0; i < kRows; ++i)
+      for (int l = 0; l < 8; ++l) lanes[i][l] = v[i];
+    for (int a = 0; a < 3; ++a) {
+      rowBytes[0][a] = int64_t(k[a]) * 4 * int64_t(sizeof(float));
+      rowBytes[1][a] = int64_t(k[a]) * 8 * int64_t(sizeof(float));
+    }
+  }
+  template <class F>
+  F get(Row row) const { return F::load(lanes[row]); }
+};
+
 /// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`,
 /// `stride` floats apart; F8 needs stride 8), with the same operations in the same order as the
 /// scalar test, so both give the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
 /// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
 /// and barycentrics.
 template <class F>
-inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTri4& rt, float tMin,
-                            float tMax, float* tOut, float* b1Out, float* b2Out) {
-  const int kx = rt.kx, ky = rt.ky, kz = rt.kz;
-  const F sx = F::broadcast(rt.sx), sy = F::broadcast(rt.sy), sz = F::broadcast(rt.sz);
+inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
+                            float* tOut, float* b1Out, float* b2Out) {
+  using R = RayTriLanes;
+  const int64_t* rowBytes = rl.rowBytes[stride == 8];  // stride is 4 or 8, known where inlined
+  const F sx = rl.get<F>(R::kSx), sy = rl.get<F>(R::kSy), sz = rl.get<F>(R::kSz);
   F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
   for (int vtx = 0; vtx < 3; ++vtx) {
-    const float* rows = base + 3 * vtx * stride;
-    const F x = F::load(rows + kx * stride) - F::broadcast(rt.org[kx]);
-    const F y = F::load(rows + ky * stride) - F::broadcast(rt.org[ky]);
-    pz[vtx] = F::load(rows + kz * stride) - F::broadcast(rt.org[kz]);
+    const char* rows = reinterpret_cast<const char*>(base + 3 * vtx * stride);
+    const auto row = [&](int a) { return F::load(reinterpret_cast<const float*>(rows + rowBytes[a])); };
+    const F x = row(0) - rl.get<F>(R::kOrgX);
+    const F y = row(1) - rl.get<F>(R::kOrgY);
+    pz[vtx] = row(2) - rl.get<F>(R::kOrgZ);
     px[vtx] = x - sx * pz[vtx];
     py[vtx] = y - sy * pz[vtx];
   }
@@ -157,7 +183,7 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
   const F detSign = det & signMask;
   const F detAbs = det ^ detSign;
   const F tAbs = tScaled ^ detSign;
-  valid = valid & (tAbs > F::broadcast(tMin) * detAbs) & (tAbs < F::broadcast(tMax) * detAbs);
+  valid = valid & (tAbs > rl.get<F>(R::kTMin) * detAbs) & (tAbs < F::broadcast(tMax) * detAbs);
   int mask = valid.mask() & ~zeroLanes;
   if (mask) {
     const F invDet = F::broadcast(1.0f) / det;
@@ -182,27 +208,27 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
   }
   for (int lanes = zeroLanes; lanes; lanes &= lanes - 1) {
     const int i = __builtin_ctz(static_cast<unsigned>(lanes));
-    if (intersectTriangleLane(base, stride, i, ray, tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
+    if (intersectTriangleLane(base, stride, i, ray, ray.tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
       mask |= 1 << i;
   }
   return mask;
 }
 
 /// One packet, four lanes (the kd-tree's test).
-inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTri4& rt, float tMin, float tMax,
-                              float tOut[4], float b1Out[4], float b2Out[4]) {
-  return intersectPackets<F4>(tri.v[0][0], 4, ray, rt, tMin, tMax, tOut, b1Out, b2Out);
+inline int intersectTriangle4(const Triangle4& tri, const Ray& ray, const RayTriLanes& rl, float tMax, float tOut[4],
+                              float b1Out[4], float b2Out[4]) {
+  return intersectPackets<F4>(tri.v[0][0], 4, ray, rl, tMax, tOut, b1Out, b2Out);
 }
 
 /// Packets [first, first + count) against the closest-hit query so far (tMax, hit), one at a
 /// time, lanes in order (the nearest, the first of equals, becomes the closest): the kd-tree's
 /// leaves. True when one was closer.
-inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float& tMax,
+inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, const RayTriLanes& rl, float& tMax,
                        Hit& hit) {
   bool found = false;
   for (uint32_t p = 0; p < count; ++p) {
     alignas(16) float t[4], b1[4], b2[4];
-    for (int mask = intersectTriangle4(first[p], ray, rt, ray.tMin, tMax, t, b1, b2); mask; mask &= mask - 1) {
+    for (int mask = intersectTriangle4(first[p], ray, rl, tMax, t, b1, b2); mask; mask &= mask - 1) {
       const int i = __builtin_ctz(static_cast<unsigned>(mask));
       if (t[i] < tMax) {
         tMax = t[i];
@@ -215,10 +241,10 @@ inline bool closerHits(const Triangle4* first, uint32_t count, const Ray& ray, c
 }
 
 /// Any hit among packets [first, first + count) in (tMin, tMax).
-inline bool anyHit(const Triangle4* first, uint32_t count, const Ray& ray, const RayTri4& rt, float tMax) {
+inline bool anyHit(const Triangle4* first, uint32_t count, const Ray& ray, const RayTriLanes& rl, float tMax) {
   alignas(16) float t[4], b1[4], b2[4];
   for (uint32_t p = 0; p < count; ++p)
-    if (intersectTriangle4(first[p], ray, rt, ray.tMin, tMax, t, b1, b2)) return true;
+    if (intersectTriangle4(first[p], ray, rl, tMax, t, b1, b2)) return true;
   return false;
 }
 
