@@ -268,8 +268,14 @@ inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, 
   };
   alignas(32) float t[8], b1[8], b2[8];
   const float* block = leaf;
-  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
+  // The first pair outside the loop (leaves of up to eight triangles have one): in a loop, GCC
+  // copies the ray's lanes to the stack before it, once a leaf.
+  if (packets >= 2) {
     take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride, t, b1, b2);
+    block += kPairFloats;
+    for (uint32_t p = 3; p < packets; p += 2, block += kPairFloats)
+      take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride, t, b1, b2);
+  }
   if (packets & 1u)
     take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride, t,
          b1, b2);
@@ -280,8 +286,12 @@ inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, 
 inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float tMax) {
   alignas(32) float t[8], b1[8], b2[8];
   const float* block = leaf;
-  for (uint32_t p = 1; p < packets; p += 2, block += kPairFloats)
+  if (packets >= 2) {  // the first pair outside the loop, as in closerHitsLeaf
     if (intersectPair(block, ray, rl, tMax, t, b1, b2)) return true;
+    block += kPairFloats;
+    for (uint32_t p = 3; p < packets; p += 2, block += kPairFloats)
+      if (intersectPair(block, ray, rl, tMax, t, b1, b2)) return true;
+  }
   return (packets & 1u) && intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2);
 }
 
