@@ -395,7 +395,6 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
       mask &= mask - 1;
       if (mask == 0) {
-        prefetchChildren(bvh, n, 1 << i0);
         cur = n.child[i0];
         continue;
       }
