@@ -201,6 +201,17 @@ struct LeafRay {
 inline uint32_t leafFirst(uint32_t ref) { return ref & kSlotMask; }
 inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountShift) + 1u; }
 
+/// Start loading the first four lines of what `c` refers to: a node, or a leaf's first packet.
+/// Always inlined (prefetchChildren, below, says why).
+[[gnu::always_inline]] inline void prefetchRef(const HbvhArrays& bvh, uint32_t c) {
+  const char* p = (c & kLeafBit) ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
+                                 : reinterpret_cast<const char*>(bvh.nodes + c);
+  _mm_prefetch(p, _MM_HINT_T0);
+  _mm_prefetch(p + 64, _MM_HINT_T0);
+  _mm_prefetch(p + 128, _MM_HINT_T0);
+  _mm_prefetch(p + 192, _MM_HINT_T0);
+}
+
 /// Start loading the entered children while their order is worked out: on the dragon a third
 /// of the kernel's samples wait on those loads. A node's four lines; a leaf's first two packets
 /// (of at most two), which start 32 bytes into a line as often as not and then span six lines.
@@ -213,27 +224,13 @@ inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountS
 [[gnu::always_inline]] inline void prefetchChildren(const HbvhArrays& bvh, const Node& n, int mask) {
   for (; mask; mask &= mask - 1) {
     const uint32_t c = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-    const char* p = (c & kLeafBit) ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
-                                   : reinterpret_cast<const char*>(bvh.nodes + c);
-    _mm_prefetch(p, _MM_HINT_T0);
-    _mm_prefetch(p + 64, _MM_HINT_T0);
-    _mm_prefetch(p + 128, _MM_HINT_T0);
-    _mm_prefetch(p + 192, _MM_HINT_T0);
+    prefetchRef(bvh, c);
     if (c & kLeafBit) {
+      const char* p = reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)));
       _mm_prefetch(p + 256, _MM_HINT_T0);
       _mm_prefetch(p + 2 * sizeof(Hbvh::LeafUnit) - 1, _MM_HINT_T0);
     }
   }
-}
-
-/// Start loading the node or the first packet of the leaf `c` refers to.
-[[gnu::always_inline]] inline void prefetchRef(const HbvhArrays& bvh, uint32_t c) {
-  const char* p = (c & kLeafBit) ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
-                                 : reinterpret_cast<const char*>(bvh.nodes + c);
-  _mm_prefetch(p, _MM_HINT_T0);
-  _mm_prefetch(p + 64, _MM_HINT_T0);
-  _mm_prefetch(p + 128, _MM_HINT_T0);
-  _mm_prefetch(p + 192, _MM_HINT_T0);
 }
 
 /// A leaf (Hbvh::LeafUnit's layout): its packets in pairs, then an odd last one. The lanes of a
@@ -287,8 +284,7 @@ inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, 
       take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride, t, b1, b2);
   }
   if (packets & 1u)
-    take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride, t,
-         b1, b2);
+    take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride, t, b1, b2);
   return found;
 }
 
