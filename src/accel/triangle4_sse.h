@@ -11,6 +11,7 @@
 
 #include <immintrin.h>
 
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 
@@ -101,7 +102,6 @@ struct RayTri4 {
   int kx, ky, kz;
   float sx, sy, sz;
   float org[3];
-  RayTri4() = default;  ///< unset (the HBVH makes it at a ray's first leaf)
   explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
     const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
@@ -152,7 +152,8 @@ template <class F>
 inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
                             float* tOut, float* b1Out, float* b2Out) {
   using R = RayTriLanes;
-  const int64_t* rowBytes = rl.rowBytes[stride == 8];  // stride is 4 or 8, known where inlined
+  assert(stride == 4 || stride == 8);
+  const int64_t* rowBytes = rl.rowBytes[stride == 8];  // known where inlined
   const F sx = rl.get<F>(R::kSx), sy = rl.get<F>(R::kSy), sz = rl.get<F>(R::kSz);
   F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
   for (int vtx = 0; vtx < 3; ++vtx) {

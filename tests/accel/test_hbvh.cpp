@@ -379,6 +379,10 @@ TEST(Hbvh, RaysFromBeforeTheirOriginAreTracedFromIt) {
     const auto back = bvh.intersect(r);
     ASSERT_TRUE(back) << Hbvh::simdName(simd);
     EXPECT_FLOAT_EQ(back->t, 1.0f) << Hbvh::simdName(simd);
+    r.tMin = -0.0f;  // -0 orders below every negative float as an integer: traced from +0 too
+    const auto fromMinusZero = bvh.intersect(r);
+    ASSERT_TRUE(fromMinusZero) << Hbvh::simdName(simd);
+    EXPECT_FLOAT_EQ(fromMinusZero->t, 1.0f) << Hbvh::simdName(simd);
   }
 }
 
