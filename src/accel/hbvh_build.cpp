@@ -22,11 +22,14 @@
 #include <array>
 #include <atomic>
 #include <cstring>
-#include <deque>
 #include <limits>
 #include <memory>
 #include <new>
+#include <cmath>
 #include <optional>
+#include <type_traits>
+#include <utility>
+#include <vector>
 
 #include <smmintrin.h>
 
@@ -88,22 +91,70 @@ struct Box4 {
 /// A node's range with its bounds and the bounds of its doubled centroids (lo + hi).
 struct Range {
   uint32_t begin = 0, end = 0;
-  int buffer = 0;  ///< which of the builder's two reference arrays holds it (partitions alternate)
   Box4 box, centroids2;
 };
 
 struct BuildNode {
   Bounds3 box;
   /// No vertex of the subtree lies farther than this from box.center(): exact at leaves, from
-  /// the children's bounds above (Builder::reach), for the bounding spheres.
-  float reach = 0.0f;
+  /// the children's bounds above (Hbvh::Flattener::reachOf); kReachUnknown until a bounding
+  /// sphere needs it (most boxes are rejected without: computing every node's read every vertex).
+  mutable float reach = kReachUnknown;
   /// SAH cost of the subtree once a ray is inside its box (leaf tests and node visits, in
   /// HbvhBuildSettings' cost units): what a tighter bound around it can save.
   float cost = 0.0f;
-  const PrimRef* prims = nullptr;  // its references (for inner nodes: the subtree's), in either array
-  uint32_t count = 0;
-  BuildNode *left = nullptr, *right = nullptr;  // in the builder's arena
-  bool leaf() const { return !left; }
+  uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
+  BuildNode* kids = nullptr;      // the two children, side by side in the builder's arena
+  /// Of the 8-wide node collapsed from this one, where it is one (Hbvh::Flattener::measure):
+  /// its subtree's nodes, spheres and leaf packets.
+  uint32_t wideNodes = 0, wideSpheres = 0, widePackets = 0;
+  static constexpr float kReachUnknown = -1.0f;
+  bool leaf() const { return !kids; }
+};
+
+/// Objects made per thread in 2 MiB blocks of huge pages and freed together. A build makes a
+/// node object for every binary node (2.7M, 170 MB for the 10M knot): one allocation each was a
+/// 4 KiB page fault every 64 of them, and on a virtual machine a fault costs 10 us (first touch
+/// of 4 KiB pages 2.7 ms a MiB, of fresh huge pages 1.7, of reused ones 0.1: AMD Zen 5 VM).
+/// Embree's builders allocate in blocks too (its FastAllocator).
+template <class T>
+class Arena {
+  static_assert(std::is_trivially_destructible_v<T>, "an arena frees its blocks without destroying objects");
+  static_assert(alignof(T) <= 64, "a block's objects are aligned to the block");
+
+public:
+  Arena() = default;
+  Arena(const Arena&) = delete;
+  Arena& operator=(const Arena&) = delete;
+  ~Arena() { clear(); }
+
+  /// n default-constructed objects side by side (n <= a block's).
+  T* make(size_t n = 1) {
+    Local& l = m_local.local();
+    if (l.used + n > kPerBlock) {
+      l.blocks.push_back(m_alloc.allocate(kBlockBytes));
+      l.used = 0;
+    }
+    T* first = reinterpret_cast<T*>(l.blocks.back() + sizeof(T) * l.used);
+    for (size_t i = 0; i < n; ++i) new (first + i) T();
+    l.used += n;
+    return first;
+  }
+  void clear() {
+    for (Local& l : m_local)
+      for (unsigned char* b : l.blocks) m_alloc.deallocate(b, kBlockBytes);
+    m_local.clear();
+  }
+
+private:
+  static constexpr size_t kBlockBytes = HugePageAllocator<unsigned char>::kHugePage;
+  static constexpr size_t kPerBlock = kBlockBytes / sizeof(T);
+  struct Local {
+    std::vector<unsigned char*> blocks;
+    size_t used = kPerBlock;  // no block yet
+  };
+  tbb::enumerable_thread_specific<Local> m_local;
+  HugePageAllocator<unsigned char> m_alloc;
 };
 
 constexpr int kMaxDepth = 60;  // binary depth; the 8-wide tree is shallower, stacks hold 7 per level
@@ -158,15 +209,10 @@ public:
   Builder(const HbvhBuildSettings& s, const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, Progress* p)
       : m_s(s), m_pos(pos), m_tris(tris), m_progress(p) {}
 
-  /// The references, and an array of the same size: a partition reads a range from one and
-  /// writes the two sides into the other (no swaps and no branch on the side; the bounds
-  /// are selected by mask). In huge pages: the root's partition is the spare array's first
-  /// touch, 57 cycles an element in 4 KiB page faults against 10 (dragon).
-  std::vector<PrimRef, HugePageAllocator<PrimRef>> refs, spare;
-  PrimRef* buffer(int b) { return b ? spare.data() : refs.data(); }
-  /// Build nodes, per thread (stable addresses; freed together: 337k nodes for the dragon
-  /// were 337k allocations and a recursive free).
-  tbb::enumerable_thread_specific<std::deque<BuildNode>> arena;
+  std::vector<PrimRef, HugePageAllocator<PrimRef>> refs;
+  /// Build nodes (stable addresses; freed together: 337k nodes for the dragon were 337k
+  /// allocations and a recursive free).
+  Arena<BuildNode> arena;
 
   /// The root's range: its bounds from every reference.
   Range rootRange() const {
@@ -189,11 +235,11 @@ public:
     return all;
   }
 
-  BuildNode* build(const Range& range, int depth) {
-    BuildNode* node = &arena.local().emplace_back();
+  /// Build the subtree of `range` into `node`.
+  void build(const Range& range, int depth, BuildNode* node) {
     const uint32_t begin = range.begin, end = range.end, count = end - begin;
     node->box = range.box.bounds();
-    node->prims = buffer(range.buffer) + begin;
+    node->first = begin;
     node->count = count;
 
     const float leafCost = m_s.intersectionCost * static_cast<float>(packets(count));
@@ -210,52 +256,31 @@ public:
 
     if (count == 1 || (!mustSplit && (depth >= kMaxDepth || leafCost <= bestCost))) {
       if (m_progress) m_progress->advance(count);
-      node->reach = leafReach(*node);
       node->cost = leafCost;
-      return node;
+      return;
     }
     Range left, right;
     if (bestAxis >= 0) partition(range, map, bestAxis, bestSplit, left, right);
     if (bestAxis < 0 || left.end == begin || left.end == end) medianSplit(range, left, right);
 
+    BuildNode* kids = arena.make(2);
+    node->kids = kids;
     if (count >= static_cast<uint32_t>(m_s.parallelThreshold)) {
       // A 10M-triangle build takes seconds: stop it when asked (every subtree of this size is
       // milliseconds).
       if (m_progress && m_progress->cancelled()) throw CancelledError();
-      tbb::parallel_invoke([&] { node->left = build(left, depth + 1); },
-                           [&] { node->right = build(right, depth + 1); });
+      tbb::parallel_invoke([&] { build(left, depth + 1, &kids[0]); }, [&] { build(right, depth + 1, &kids[1]); });
     } else {
-      node->left = build(left, depth + 1);
-      node->right = build(right, depth + 1);
+      build(left, depth + 1, &kids[0]);
+      build(right, depth + 1, &kids[1]);
     }
-    node->reach = std::max(reach(*node, *node->left), reach(*node, *node->right));
     const float area = node->box.area();
-    node->cost = m_s.traversalCost + (area > 0.0f ? (node->left->box.area() * node->left->cost +
-                                                     node->right->box.area() * node->right->cost) / area
-                                                  : node->left->cost + node->right->cost);
-    return node;
+    node->cost = m_s.traversalCost + (area > 0.0f ? (kids[0].box.area() * kids[0].cost +
+                                                     kids[1].box.area() * kids[1].cost) / area
+                                                  : kids[0].cost + kids[1].cost);
   }
 
 private:
-  /// The farthest vertex of a leaf from its box's centre.
-  float leafReach(const BuildNode& n) const {
-    const Vec3 c = n.box.center();
-    float r2 = 0.0f;
-    for (uint32_t i = 0; i < n.count; ++i) {
-      const UVec3& t = m_tris[n.prims[i].id()];
-      for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(m_pos[t[k]] - c, m_pos[t[k]] - c));
-    }
-    return std::sqrt(r2);
-  }
-  /// A bound on the distance from parent's box centre to child's vertices: the child's own
-  /// reach from its centre, or its box's farthest corner, whichever is less. (Reading every
-  /// vertex of every candidate node, top levels included, was most of the flattening.)
-  static float reach(const BuildNode& parent, const BuildNode& child) {
-    const Vec3 c = parent.box.center();
-    const Vec3 far = glm::max(glm::abs(child.box.lo - c), glm::abs(child.box.hi - c));
-    return std::min(glm::length(child.box.center() - c) + child.reach, glm::length(far));
-  }
-
   /// Bins for a range of n triangles: 8 + n / 16, up to the settings' count (Embree's
   /// BinMapping takes 4 + n / 20, which made the dragon's SAH 43.29 against 43.10): most ranges
   /// are small, and a sweep over 16 bins of a dozen triangles was most of their split search.
@@ -281,7 +306,7 @@ private:
   /// parallel chunks and merged (exact: the same bins at any thread count).
   void findSplit(const Range& range, const BinMap& map, int& bestAxis, int& bestSplit, float& bestCost) {
     const int nb = map.count;
-    const PrimRef* prims = buffer(range.buffer);
+    const PrimRef* prims = refs.data();
     const float invArea = 1.0f / std::max(range.box.area(), 1e-30f);
     // Bins for a chunk of the range; chunks are joined by min, max and sums: exact.
     struct Body {
@@ -346,22 +371,63 @@ private:
     }
   }
 
-  /// Split `range` at bin `split` of `axis` (left: bins below it) into the other array: each
-  /// reference is written at the next left slot and at the next right slot (from the end
-  /// down), and only its side's cursor moves. The children's bounds are gathered on the way,
-  /// each side taking the element or an empty box by mask. (The in-place Hoare partition's
-  /// branch on the side mispredicted: 25-40 cycles an element at every range size.)
+  /// Split `range` in place at bin `split` of `axis` (left: bins below it), the children's
+  /// bounds gathered on the way (no separate pass over each child). Ranges of up to
+  /// kScratchPartition references go through a scratch array and back, without a branch on the
+  /// side; larger ones by swaps (Hoare), whose branches the long runs of one side at the top of
+  /// the tree keep predicted. Cycles an element (rdtsc, dragon, AMD Zen 5): swaps 21 at ranges
+  /// of 8-15 down to 7 above 2^18, the scratch array 7-9 throughout.
+  void partition(const Range& range, const BinMap& map, int axis, int split, Range& left, Range& right) {
+    if (range.end - range.begin > kScratchPartition) {
+      partitionInPlace(range, map, axis, split, left, right);
+      return;
+    }
+    if (axis == 0) partitionScratch<0>(range, map, split, left, right);
+    else if (axis == 1) partitionScratch<1>(range, map, split, left, right);
+    else partitionScratch<2>(range, map, split, left, right);
+  }
+  static constexpr uint32_t kScratchPartition = 65536;  ///< references: 2 MiB of scratch a thread
+
+  void partitionInPlace(const Range& range, const BinMap& map, int axis, int split, Range& left, Range& right) {
+    const __m128i splitV = _mm_set1_epi32(split);
+    auto isLeft = [&](const PrimRef& r) {
+      return (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmplt_epi32(map.bins(r), splitV))) >> axis) & 1;
+    };
+    // The sides' bounds in locals: in `left` and `right` (references GCC cannot prove apart
+    // from refs) every element was a load, a min and a store, one store-forwarding chain.
+    Box4 leftBox, leftC2, rightBox, rightC2;
+    auto add = [](Box4& box, Box4& c2s, const PrimRef& r) {
+      box.extend(r.lo, r.hi);
+      const __m128 c2 = _mm_add_ps(r.lo, r.hi);
+      c2s.extend(c2, c2);
+    };
+    uint32_t i = range.begin, j = range.end;
+    while (true) {
+      while (i < j && isLeft(refs[i])) add(leftBox, leftC2, refs[i++]);
+      while (i < j && !isLeft(refs[j - 1])) add(rightBox, rightC2, refs[--j]);
+      if (i >= j) break;
+      std::swap(refs[i], refs[j - 1]);
+      add(leftBox, leftC2, refs[i++]);
+      add(rightBox, rightC2, refs[--j]);
+    }
+    setSides(range, i, leftBox, leftC2, rightBox, rightC2, left, right);
+  }
+
+  /// Each reference is written at the next left slot and at the next right slot (from the end
+  /// down) of this thread's scratch array, and only its side's cursor moves; the sides' bounds
+  /// take the element or an empty box by mask. Then the range is copied back.
   template <int Axis>
-  void partitionAxis(const Range& range, const BinMap& map, int split, Range& left, Range& right) {
-    const PrimRef* src = buffer(range.buffer);
-    PrimRef* dst = buffer(range.buffer ^ 1);
+  void partitionScratch(const Range& range, const BinMap& map, int split, Range& left, Range& right) {
+    thread_local std::vector<PrimRef> scratch;  // kept: 2 MiB a thread
+    const uint32_t n = range.end - range.begin;
+    if (scratch.size() < n) scratch.resize(kScratchPartition);
+    const PrimRef* src = refs.data() + range.begin;
+    PrimRef* dst = scratch.data();
     const __m128i splitV = _mm_set1_epi32(split);
     const __m128 inf = _mm_set1_ps(kInf), negInf = _mm_set1_ps(-kInf);
-    // The sides' bounds in locals (references GCC cannot prove apart from the arrays would be a
-    // load and a store an element).
     Box4 leftBox, leftC2, rightBox, rightC2;
-    uint32_t l = range.begin, r = range.end - 1;  // r wraps below begin only after the last one
-    for (uint32_t i = range.begin; i < range.end; ++i) {
+    uint32_t l = 0, r = n - 1;  // r wraps below 0 only after the last reference
+    for (uint32_t i = 0; i < n; ++i) {
       const PrimRef p = src[i];
       const __m128i below = _mm_cmplt_epi32(map.bins(p), splitV);
       const __m128 mask = _mm_castsi128_ps(_mm_shuffle_epi32(below, _MM_SHUFFLE(Axis, Axis, Axis, Axis)));
@@ -376,19 +442,19 @@ private:
       rightBox.extend(_mm_blendv_ps(p.lo, inf, mask), _mm_blendv_ps(p.hi, negInf, mask));
       rightC2.extend(_mm_blendv_ps(c2, inf, mask), _mm_blendv_ps(c2, negInf, mask));
     }
+    std::memcpy(static_cast<void*>(refs.data() + range.begin), dst, n * sizeof(PrimRef));
+    setSides(range, range.begin + l, leftBox, leftC2, rightBox, rightC2, left, right);
+  }
+
+  static void setSides(const Range& range, uint32_t mid, const Box4& leftBox, const Box4& leftC2,
+                       const Box4& rightBox, const Box4& rightC2, Range& left, Range& right) {
     left.box = leftBox;
     left.centroids2 = leftC2;
     right.box = rightBox;
     right.centroids2 = rightC2;
     left.begin = range.begin;
-    left.end = right.begin = l;
+    left.end = right.begin = mid;
     right.end = range.end;
-    left.buffer = right.buffer = range.buffer ^ 1;
-  }
-  void partition(const Range& range, const BinMap& map, int axis, int split, Range& left, Range& right) {
-    if (axis == 0) partitionAxis<0>(range, map, split, left, right);
-    else if (axis == 1) partitionAxis<1>(range, map, split, left, right);
-    else partitionAxis<2>(range, map, split, left, right);
   }
 
   /// Every centroid coincides (or no split helps yet the leaf would be too big): split the
@@ -398,7 +464,7 @@ private:
     const int axis = maxDimension(c.diagonal());
     const uint32_t mid = range.begin + (range.end - range.begin) / 2;
     auto key = [axis](const PrimRef& r) { return r.box().center()[axis]; };
-    PrimRef* prims = buffer(range.buffer);
+    PrimRef* prims = refs.data();
     std::nth_element(prims + range.begin, prims + mid, prims + range.end,
                      [&](const PrimRef& a, const PrimRef& b) {
                        return key(a) < key(b) || (key(a) == key(b) && a.id() < b.id());
@@ -411,7 +477,6 @@ private:
       const __m128 c2 = _mm_add_ps(prims[i].lo, prims[i].hi);
       to.centroids2.extend(c2, c2);
     }
-    left.buffer = right.buffer = range.buffer;
     left.begin = range.begin;
     left.end = right.begin = mid;
     right.end = range.end;
@@ -430,23 +495,42 @@ private:
 /// BVH2 -> BVHN collapse; Wald et al. 2008, "Getting Rid of Packets"; Embree's BVH8), laid out
 /// depth first.
 /// Two passes: `measure` counts every collapsed subtree's nodes, packets and spheres (bottom
-/// up, in parallel), so that `fill` can give each subtree its ranges of the arrays up front and
-/// write subtrees in parallel; the layout is the serial depth-first one, at any thread count.
+/// up, in parallel) into the binary node it is collapsed from, so that `fill` can give each
+/// subtree its ranges of the arrays up front and write subtrees in parallel; the layout is the
+/// serial depth-first one, at any thread count. Both passes collapse a node the same way
+/// (`collapse`); nothing else is allocated.
 struct Hbvh::Flattener {
   Hbvh& bvh;
+  const std::vector<PrimRef, HugePageAllocator<PrimRef>>& refs;
   const std::vector<Vec3>& pos;
   const std::vector<UVec3>& tris;
 
-  /// One collapsed node: its children (binary build nodes) and its subtree's sizes.
-  struct Collapsed {
-    const BuildNode* kids[kWidth] = {};
-    int k = 0;
-    Sphere sphere[kWidth];          ///< the kids' bounding spheres, where sphereMask has them
-    uint32_t sphereMask = 0;
-    uint32_t nodes = 0, packets = 0, spheres = 0, leaves = 0;
-    int depth = 0;  ///< levels of Nodes below and including this one
-    std::unique_ptr<Collapsed> sub[kWidth];  ///< for inner kids
-  };
+  /// The children of the 8-wide node collapsed from inner node n (a lone leaf is the root's
+  /// only child); returns how many.
+  static int collapse(const BuildNode& n, const BuildNode* kids[kWidth]) {
+    if (n.leaf()) {
+      kids[0] = &n;
+      return 1;
+    }
+    kids[0] = &n.kids[0];
+    kids[1] = &n.kids[1];
+    int k = 2;
+    while (k < kWidth) {
+      int best = -1;
+      float bestArea = -1.0f;
+      for (int i = 0; i < k; ++i)
+        if (!kids[i]->leaf() && kids[i]->box.area() > bestArea) {
+          best = i;
+          bestArea = kids[i]->box.area();
+        }
+      if (best < 0) break;
+      const BuildNode* opened = kids[best];
+      kids[best] = &opened->kids[0];
+      kids[k++] = &opened->kids[1];
+    }
+    return k;
+  }
+
   /// Write the leaf of triangles ids[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
   /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes
   /// (read by closerHitsLeaf / anyHitLeaf in hbvh_traverse_kernel.h).
@@ -472,74 +556,56 @@ struct Hbvh::Flattener {
   /// as parallel tasks.
   uint32_t parallelFill() const { return uint32_t(bvh.m_settings.parallelThreshold); }
 
-  /// SAH cost of the binary subtree, relative to the root's area; counts binary nodes.
-  double sah(const BuildNode& n, float rootArea, uint64_t& binaryNodes) const {
+  /// SAH cost of the binary subtree, relative to the root's area; counts binary nodes and leaves.
+  double sah(const BuildNode& n, float rootArea, uint64_t& binaryNodes, uint64_t& leaves) const {
     ++binaryNodes;
     const double rel = n.box.area() / rootArea;
-    if (n.leaf()) return rel * bvh.m_settings.intersectionCost * ((n.count + 3u) / 4u);
-    return rel * bvh.m_settings.traversalCost + sah(*n.left, rootArea, binaryNodes) +
-           sah(*n.right, rootArea, binaryNodes);
-  }
-
-  /// The collapse of inner node n (or a lone leaf as the root's only child), measured.
-  std::unique_ptr<Collapsed> measure(const BuildNode& n) const {
-    auto c = std::make_unique<Collapsed>();
     if (n.leaf()) {
-      c->kids[0] = &n;
-      c->k = 1;
-    } else {
-      c->kids[0] = n.left;
-      c->kids[1] = n.right;
-      c->k = 2;
-      while (c->k < kWidth) {
-        int best = -1;
-        float bestArea = -1.0f;
-        for (int i = 0; i < c->k; ++i)
-          if (!c->kids[i]->leaf() && c->kids[i]->box.area() > bestArea) {
-            best = i;
-            bestArea = c->kids[i]->box.area();
-          }
-        if (best < 0) break;
-        const BuildNode* opened = c->kids[best];
-        c->kids[best] = opened->left;
-        c->kids[c->k++] = opened->right;
-      }
+      ++leaves;
+      return rel * bvh.m_settings.intersectionCost * ((n.count + 3u) / 4u);
     }
-    auto sub = [&](int i) { c->sub[i] = measure(*c->kids[i]); };
-    if (n.count > parallelFill()) {
-      tbb::parallel_for(0, c->k, [&](int i) {
-        if (!c->kids[i]->leaf()) sub(i);
-      });
-    } else {
-      for (int i = 0; i < c->k; ++i)
-        if (!c->kids[i]->leaf()) sub(i);
-    }
-    c->nodes = 1;
-    for (int i = 0; i < c->k; ++i) {
-      if (fitSphere(*c->kids[i], c->sphere[i])) {
-        c->sphereMask |= 1u << i;
-        ++c->spheres;
-      }
-      if (c->kids[i]->leaf()) {
-        c->packets += (c->kids[i]->count + 3u) / 4u;
-        ++c->leaves;
-      } else {
-        const Collapsed& s = *c->sub[i];
-        c->nodes += s.nodes;
-        c->packets += s.packets;
-        c->spheres += s.spheres;
-        c->leaves += s.leaves;
-        c->depth = std::max(c->depth, s.depth);
-      }
-    }
-    ++c->depth;
-    return c;
+    return rel * bvh.m_settings.traversalCost + sah(n.kids[0], rootArea, binaryNodes, leaves) +
+           sah(n.kids[1], rootArea, binaryNodes, leaves);
   }
 
-  /// Write collapsed node c at node `node`, its spheres from `sphere`, its leaves' packets from
-  /// `packet`, and its inner kids' subtrees after it, in kid order (the serial depth-first
-  /// layout: node, then each kid's subtree; spheres of this node's kids, then the subtrees').
-  void fill(const Collapsed& c, uint32_t node, uint32_t sphere, uint32_t packet, uint32_t triangles) {
+  /// Measure the collapse of inner node n (or of a lone leaf as the root's only child) into
+  /// n's wide counts; returns its depth in 8-wide levels.
+  int measure(BuildNode& n) {
+    const BuildNode* kids[kWidth];
+    const int k = collapse(n, kids);
+    int depths[kWidth] = {};
+    // Kids are subtrees of n: measuring one writes only its own nodes.
+    auto sub = [&](int i) {
+      if (!kids[i]->leaf()) depths[i] = measure(*const_cast<BuildNode*>(kids[i]));
+    };
+    if (n.count > parallelFill()) tbb::parallel_for(0, k, sub);
+    else
+      for (int i = 0; i < k; ++i) sub(i);
+    n.wideNodes = 1;
+    n.wideSpheres = n.widePackets = 0;
+    int depth = 0;
+    for (int i = 0; i < k; ++i) {
+      Sphere sphere;
+      if (fitSphere(*kids[i], sphere)) ++n.wideSpheres;
+      if (kids[i]->leaf()) {
+        n.widePackets += (kids[i]->count + 3u) / 4u;
+      } else {
+        n.wideNodes += kids[i]->wideNodes;
+        n.wideSpheres += kids[i]->wideSpheres;
+        n.widePackets += kids[i]->widePackets;
+        depth = std::max(depth, depths[i]);
+      }
+    }
+    return depth + 1;
+  }
+
+  /// Write the collapse of n at node `node`, its kids' spheres from `sphere`, its leaves'
+  /// packets from `packet`, and its inner kids' subtrees after it, in kid order (the serial
+  /// depth-first layout: node, then each kid's subtree; spheres of this node's kids, then the
+  /// subtrees').
+  void fill(const BuildNode& n, uint32_t node, uint32_t sphere, uint32_t packet) {
+    const BuildNode* kids[kWidth];
+    const int k = collapse(n, kids);
     Node out;
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < kWidth; ++i) {
@@ -547,49 +613,86 @@ struct Hbvh::Flattener {
         out.hi[a][i] = -kInf;
       }
     out.sphereBase = sphere;
-    out.sphereMask = c.sphereMask;
+    out.sphereMask = 0;
     for (int i = 0; i < kWidth; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
-    for (int i = 0; i < c.k; ++i) {
-      const BuildNode& kid = *c.kids[i];
+    for (int i = 0; i < k; ++i) {
       for (int a = 0; a < 3; ++a) {
-        out.lo[a][i] = kid.box.lo[a];
-        out.hi[a][i] = kid.box.hi[a];
+        out.lo[a][i] = kids[i]->box.lo[a];
+        out.hi[a][i] = kids[i]->box.hi[a];
       }
-      if (c.sphereMask & (1u << i)) bvh.m_spheres[sphere++] = Vec4(c.sphere[i].center, c.sphere[i].radius);
+      Sphere s;
+      if (fitSphere(*kids[i], s)) {
+        out.sphereMask |= 1u << i;
+        bvh.m_spheres[sphere++] = Vec4(s.center, s.radius);
+      }
     }
     // Where each kid's part starts.
     uint32_t nextNode = node + 1;
     uint32_t starts[kWidth][3];  // node, sphere, packet
-    for (int i = 0; i < c.k; ++i) {
+    for (int i = 0; i < k; ++i) {
       starts[i][0] = nextNode;
       starts[i][1] = sphere;
       starts[i][2] = packet;
-      if (c.kids[i]->leaf()) {
-        const uint32_t count = (c.kids[i]->count + 3u) / 4u;
+      if (kids[i]->leaf()) {
+        const uint32_t count = (kids[i]->count + 3u) / 4u;
         out.child[i] = kLeafBit | ((count - 1u) << kCountShift) | packet;
         packet += count;
       } else {
-        const Collapsed& s = *c.sub[i];
         out.child[i] = nextNode;
-        nextNode += s.nodes;
-        sphere += s.spheres;
-        packet += s.packets;
+        nextNode += kids[i]->wideNodes;
+        sphere += kids[i]->wideSpheres;
+        packet += kids[i]->widePackets;
       }
     }
     bvh.m_nodes[node] = out;
     auto kid = [&](int i) {
-      const BuildNode& b = *c.kids[i];
+      const BuildNode& b = *kids[i];
       if (b.leaf()) {
         uint32_t ids[64];  // maxLeafSize <= 64
-        for (uint32_t j = 0; j < b.count; ++j) ids[j] = b.prims[j].id();
+        for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
         packLeaf(ids, b.count, reinterpret_cast<float*>(bvh.m_leaves.data() + starts[i][2]));
       } else {
-        fill(*c.sub[i], starts[i][0], starts[i][1], starts[i][2], c.kids[i]->count);
+        fill(b, starts[i][0], starts[i][1], starts[i][2]);
       }
     };
-    if (triangles > parallelFill()) tbb::parallel_for(0, c.k, kid);
+    if (n.count > parallelFill()) tbb::parallel_for(0, k, kid);
     else
-      for (int i = 0; i < c.k; ++i) kid(i);
+      for (int i = 0; i < k; ++i) kid(i);
+  }
+
+  /// The farthest vertex of a leaf from its box's centre.
+  float leafReach(const BuildNode& n) const {
+    const Vec3 c = n.box.center();
+    float r2 = 0.0f;
+    for (uint32_t i = n.first; i < n.first + n.count; ++i) {
+      const UVec3& t = tris[refs[i].id()];
+      for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(pos[t[k]] - c, pos[t[k]] - c));
+    }
+    return std::sqrt(r2);
+  }
+  /// n's reach (BuildNode::reach), made on first use. Above the leaves: the larger over the two
+  /// children of a bound on the distance from n's box centre to the child's vertices, the
+  /// child's own reach from its centre or its box's farthest corner, whichever is less (the
+  /// child's reach is not needed where the corner is nearer). Called for a subtree only once
+  /// no other task works in it (measure's kids are measured first), and by fill on what
+  /// measure made.
+  float reachOf(const BuildNode& n) const {
+    if (n.reach != BuildNode::kReachUnknown) return n.reach;
+    float r;
+    if (n.leaf()) {
+      r = leafReach(n);
+    } else {
+      const Vec3 c = n.box.center();
+      r = 0.0f;
+      for (int i = 0; i < 2; ++i) {
+        const BuildNode& child = n.kids[i];
+        const float corner = glm::length(glm::max(glm::abs(child.box.lo - c), glm::abs(child.box.hi - c)));
+        const float centre = glm::length(child.box.center() - c);
+        r = std::max(r, corner <= centre ? corner : std::min(centre + reachOf(child), corner));
+      }
+    }
+    n.reach = r;
+    return r;
   }
 
   /// A sphere centred on the box, of radius the subtree's reach (BuildNode::reach: the farthest
@@ -600,7 +703,7 @@ struct Hbvh::Flattener {
   ///   (A_box - A_sphere) cost > A_box sphereTestCost,
   /// and never where its area is not below sphereAreaRatio times the box's. A box touched on
   /// both faces of its widest axis needs a sphere of diameter >= that extent, so most boxes are
-  /// rejected at once.
+  /// rejected at once (and their reach never made).
   bool fitSphere(const BuildNode& n, Sphere& out) const {
     const HbvhBuildSettings& s = bvh.m_settings;
     float ratio = s.sphereAreaRatio;
@@ -612,7 +715,7 @@ struct Hbvh::Flattener {
     // Inflate by a relative 1e-5 so that float rounding in the sphere test never culls what
     // the box test keeps.
     out.center = n.box.center();
-    out.radius = n.reach * (1.0f + 1e-5f) + 1e-30f;
+    out.radius = reachOf(n) * (1.0f + 1e-5f) + 1e-30f;
     return out.area() < ratio * boxArea;
   }
 };
@@ -694,29 +797,27 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
     m_stats.buildSeconds = timer.seconds();
     return;
   }
-  builder.spare.resize(refs.size());
-  const BuildNode* root = builder.build(builder.rootRange(), 0);
+  BuildNode* root = builder.arena.make();
+  builder.build(builder.rootRange(), 0, root);
 
   // Collapse to kWidth children per node and flatten depth first.
-  Flattener flat{*this, positions, triangles};
-  uint64_t binaryNodes = 0;
-  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f), binaryNodes);
+  Flattener flat{*this, builder.refs, positions, triangles};
+  uint64_t binaryNodes = 0, leaves = 0;
+  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f), binaryNodes, leaves);
   // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
-  std::unique_ptr<Flattener::Collapsed> top = flat.measure(*root);
-  m_nodes.resize(top->nodes);
-  m_spheres.resize(top->spheres);
-  m_leaves.resize(top->packets);
-  flat.fill(*top, 0, 0, 0, root->count);
+  m_stats.maxDepth = flat.measure(*root);
+  m_nodes.resize(root->wideNodes);
+  m_spheres.resize(root->wideSpheres);
+  m_leaves.resize(root->widePackets);
+  flat.fill(*root, 0, 0, 0);
   m_stats.nodes = m_nodes.size();
-  m_stats.leaves = top->leaves;
+  m_stats.leaves = leaves;
   m_stats.binaryNodes = binaryNodes;
-  m_stats.maxDepth = top->depth;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
   m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_leaves.size() * sizeof(LeafUnit);
   // Free the build trees before timing stops.
   builder.arena.clear();
-  top.reset();
   m_stats.buildSeconds = timer.seconds();
   if (progress) progress->finish();
 }
