@@ -96,6 +96,8 @@ struct Range {
 
 struct BuildNode {
   Bounds3 box;
+  BuildNode* kids = nullptr;  // the two children, side by side in the builder's arena
+  float area = 0.0f;  ///< box.area(), which the collapse compares over and over
   /// No vertex of the subtree lies farther than this from box.center(): exact at leaves, from
   /// the children's bounds above (Hbvh::Flattener::reachOf); kReachUnknown until a bounding
   /// sphere needs it (most boxes are rejected without: computing every node's read every vertex).
@@ -104,13 +106,13 @@ struct BuildNode {
   /// HbvhBuildSettings' cost units): what a tighter bound around it can save.
   float cost = 0.0f;
   uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
-  BuildNode* kids = nullptr;      // the two children, side by side in the builder's arena
   /// Of the 8-wide node collapsed from this one, where it is one (Hbvh::Flattener::measure):
   /// its subtree's nodes, spheres and leaf packets.
   uint32_t wideNodes = 0, wideSpheres = 0, widePackets = 0;
   static constexpr float kReachUnknown = -1.0f;
   bool leaf() const { return !kids; }
 };
+static_assert(sizeof(BuildNode) == 64, "a build node is one cache line");
 
 /// Objects made per thread in 2 MiB blocks of huge pages and freed together. A build makes a
 /// node object for every binary node (2.7M, 170 MB for the 10M knot): one allocation each was a
@@ -161,12 +163,23 @@ constexpr int kMaxDepth = 60;  // binary depth; the 8-wide tree is shallower, st
 constexpr int kMaxBins = 256;
 /// Ranges at least this large are binned in parallel chunks (merged exactly: min, max, counts).
 constexpr uint32_t kParallelBinning = 65536;
+/// Ranges at least this large are binned into two sets of bins, even and odd references, then
+/// merged: neighbours often share a bin, and each add to a bin waits for the previous one's
+/// store.
+constexpr uint32_t kTwoBinSets = 64;
 
 /// Per axis and bin: the bounds of the primitives whose centroid falls in it, and their count.
 struct Bins {
   Box4 box[3][kMaxBins];
   uint32_t count[3][kMaxBins];
   explicit Bins(int bins) { clear(bins); }
+  void merge(const Bins& o, int bins) {
+    for (int a = 0; a < 3; ++a)
+      for (int i = 0; i < bins; ++i) {
+        box[a][i].extend(o.box[a][i]);
+        count[a][i] += o.count[a][i];
+      }
+  }
   void clear(int bins) {
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < bins; ++i) {
@@ -239,6 +252,7 @@ public:
   void build(const Range& range, int depth, BuildNode* node) {
     const uint32_t begin = range.begin, end = range.end, count = end - begin;
     node->box = range.box.bounds();
+    node->area = node->box.area();
     node->first = begin;
     node->count = count;
 
@@ -274,9 +288,8 @@ public:
       build(left, depth + 1, &kids[0]);
       build(right, depth + 1, &kids[1]);
     }
-    const float area = node->box.area();
-    node->cost = m_s.traversalCost + (area > 0.0f ? (kids[0].box.area() * kids[0].cost +
-                                                     kids[1].box.area() * kids[1].cost) / area
+    const float area = node->area;
+    node->cost = m_s.traversalCost + (area > 0.0f ? (kids[0].area * kids[0].cost + kids[1].area * kids[1].cost) / area
                                                   : kids[0].cost + kids[1].cost);
   }
 
@@ -291,15 +304,26 @@ private:
 
   /// Bin prims[begin, end) on all three axes into `bins` (SSE: one bin index per axis at once).
   static void binRange(const PrimRef* prims, uint32_t begin, uint32_t end, const BinMap& map, Bins& bins) {
-    alignas(16) int32_t idx[4];
-    for (uint32_t i = begin; i < end; ++i) {
-      const PrimRef& r = prims[i];
+    const auto add = [&](Bins& to, const PrimRef& r) {
+      alignas(16) int32_t idx[4];
       _mm_store_si128(reinterpret_cast<__m128i*>(idx), map.bins(r));
       for (int a = 0; a < 3; ++a) {
-        bins.box[a][idx[a]].extend(r.lo, r.hi);
-        ++bins.count[a][idx[a]];
+        to.box[a][idx[a]].extend(r.lo, r.hi);
+        ++to.count[a][idx[a]];
       }
+    };
+    uint32_t i = begin;
+    if (end - begin >= kTwoBinSets) {
+      thread_local std::unique_ptr<Bins> odd;
+      if (!odd) odd = std::make_unique<Bins>(map.count);
+      else odd->clear(map.count);
+      for (; i + 1 < end; i += 2) {
+        add(bins, prims[i]);
+        add(*odd, prims[i + 1]);
+      }
+      bins.merge(*odd, map.count);
     }
+    for (; i < end; ++i) add(bins, prims[i]);
   }
 
   /// Binned SAH over the three axes: the split plane of least cost. Large ranges are binned in
@@ -317,13 +341,7 @@ private:
       Body(const PrimRef* p, const BinMap& m, int n) : prims(p), map(m), nb(n), bins(std::make_unique<Bins>(n)) {}
       Body(Body& o, tbb::split) : prims(o.prims), map(o.map), nb(o.nb), bins(std::make_unique<Bins>(o.nb)) {}
       void operator()(const tbb::blocked_range<uint32_t>& r) { binRange(prims, r.begin(), r.end(), map, *bins); }
-      void join(const Body& o) {
-        for (int ax = 0; ax < 3; ++ax)
-          for (int i = 0; i < nb; ++i) {
-            bins->box[ax][i].extend(o.bins->box[ax][i]);
-            bins->count[ax][i] += o.bins->count[ax][i];
-          }
-      }
+      void join(const Body& o) { bins->merge(*o.bins, nb); }
     };
     // Small ranges (nearly every node) bin into this thread's scratch bins: binRange runs no
     // TBB work, so nothing else can use them meanwhile.
@@ -386,7 +404,7 @@ private:
     else if (axis == 1) partitionScratch<1>(range, map, split, left, right);
     else partitionScratch<2>(range, map, split, left, right);
   }
-  static constexpr uint32_t kScratchPartition = 65536;  ///< references: 2 MiB of scratch a thread
+  static constexpr uint32_t kScratchPartition = 16384;  ///< references: 512 KiB of scratch a thread
 
   void partitionInPlace(const Range& range, const BinMap& map, int axis, int split, Range& left, Range& right) {
     const __m128i splitV = _mm_set1_epi32(split);
@@ -519,9 +537,9 @@ struct Hbvh::Flattener {
       int best = -1;
       float bestArea = -1.0f;
       for (int i = 0; i < k; ++i)
-        if (!kids[i]->leaf() && kids[i]->box.area() > bestArea) {
+        if (!kids[i]->leaf() && kids[i]->area > bestArea) {
           best = i;
-          bestArea = kids[i]->box.area();
+          bestArea = kids[i]->area;
         }
       if (best < 0) break;
       const BuildNode* opened = kids[best];
@@ -559,7 +577,7 @@ struct Hbvh::Flattener {
   /// SAH cost of the binary subtree, relative to the root's area; counts binary nodes and leaves.
   double sah(const BuildNode& n, float rootArea, uint64_t& binaryNodes, uint64_t& leaves) const {
     ++binaryNodes;
-    const double rel = n.box.area() / rootArea;
+    const double rel = n.area / rootArea;
     if (n.leaf()) {
       ++leaves;
       return rel * bvh.m_settings.intersectionCost * ((n.count + 3u) / 4u);
@@ -709,7 +727,7 @@ struct Hbvh::Flattener {
     float ratio = s.sphereAreaRatio;
     if (s.sphereTestCost > 0.0f) ratio = std::min(ratio, 1.0f - s.sphereTestCost / std::max(n.cost, 1e-30f));
     if (!(ratio > 0.0f)) return false;
-    const float boxArea = n.box.area();
+    const float boxArea = n.area;
     const float widest = maxComponent(n.box.diagonal());
     if (kPi * widest * widest >= ratio * boxArea) return false;
     // Inflate by a relative 1e-5 so that float rounding in the sphere test never culls what
@@ -803,7 +821,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // Collapse to kWidth children per node and flatten depth first.
   Flattener flat{*this, builder.refs, positions, triangles};
   uint64_t binaryNodes = 0, leaves = 0;
-  m_stats.sahCost = flat.sah(*root, std::max(root->box.area(), 1e-30f), binaryNodes, leaves);
+  m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);
   // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
   m_stats.maxDepth = flat.measure(*root);
   m_nodes.resize(root->wideNodes);
