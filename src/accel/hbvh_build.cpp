@@ -21,11 +21,11 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <memory>
 #include <new>
-#include <cmath>
 #include <optional>
 #include <type_traits>
 #include <utility>
@@ -53,7 +53,8 @@ Bounds3 toBounds(__m128 lo, __m128 hi) {
 /// The w lanes take part in that arithmetic, so the id is stored with kIdTag set: a normal float
 /// in [2, 32) for any id below 2^25. As the bare id it was a denormal, and every add of a
 /// reference's lanes took a microcode assist wherever denormals are not flushed (the whole build
-/// 590 -> 302 ms on the dragon, AMD Zen 5; Embree's threads set FTZ/DAZ, ours cannot count on it).
+/// 590 -> 302 ms on the dragon, AMD Zen 5; Embree sets FTZ/DAZ for its builds and asks its
+/// callers to set them, a library cannot count on a caller's MXCSR).
 struct alignas(16) PrimRef {
   static constexpr uint32_t kIdTag = 0x40000000u;
   /// A triangle that cannot be bounded (a NaN: removed before the build).
@@ -118,11 +119,13 @@ static_assert(sizeof(BuildNode) == 64, "a build node is one cache line");
 /// node object for every binary node (2.7M, 170 MB for the 10M knot): one allocation each was a
 /// 4 KiB page fault every 64 of them, and on a virtual machine a fault costs 10 us (first touch
 /// of 4 KiB pages 2.7 ms a MiB, of fresh huge pages 1.7, of reused ones 0.1: AMD Zen 5 VM).
-/// Embree's builders allocate in blocks too (its FastAllocator).
+/// Embree's builders allocate in blocks too (its FastAllocator). A build that needs fewer
+/// objects than a block holds (expect()) gets smaller blocks of ordinary memory: a 12-triangle
+/// scene should not fault in a 2 MiB page.
 template <class T>
 class Arena {
   static_assert(std::is_trivially_destructible_v<T>, "an arena frees its blocks without destroying objects");
-  static_assert(alignof(T) <= 64, "a block's objects are aligned to the block");
+  static_assert(alignof(T) <= 16, "blocks are aligned to 16 bytes at least (operator new's)");
 
 public:
   Arena() = default;
@@ -130,11 +133,14 @@ public:
   Arena& operator=(const Arena&) = delete;
   ~Arena() { clear(); }
 
-  /// n default-constructed objects side by side (n <= a block's).
+  /// Blocks sized for at most `objects` in all (set before the first make()).
+  void expect(size_t objects) { m_perBlock = std::max<size_t>(std::min(objects, kPerHugeBlock), 2); }
+
+  /// n default-constructed objects side by side (n <= 2).
   T* make(size_t n = 1) {
     Local& l = m_local.local();
-    if (l.used + n > kPerBlock) {
-      l.blocks.push_back(m_alloc.allocate(kBlockBytes));
+    if (l.blocks.empty() || l.used + n > m_perBlock) {
+      l.blocks.push_back(m_alloc.allocate(m_perBlock * sizeof(T)));
       l.used = 0;
     }
     T* first = reinterpret_cast<T*>(l.blocks.back() + sizeof(T) * l.used);
@@ -144,19 +150,19 @@ public:
   }
   void clear() {
     for (Local& l : m_local)
-      for (unsigned char* b : l.blocks) m_alloc.deallocate(b, kBlockBytes);
+      for (unsigned char* b : l.blocks) m_alloc.deallocate(b, m_perBlock * sizeof(T));
     m_local.clear();
   }
 
 private:
-  static constexpr size_t kBlockBytes = HugePageAllocator<unsigned char>::kHugePage;
-  static constexpr size_t kPerBlock = kBlockBytes / sizeof(T);
+  static constexpr size_t kPerHugeBlock = HugePageAllocator<unsigned char>::kHugePage / sizeof(T);
   struct Local {
     std::vector<unsigned char*> blocks;
-    size_t used = kPerBlock;  // no block yet
+    size_t used = 0;
   };
   tbb::enumerable_thread_specific<Local> m_local;
   HugePageAllocator<unsigned char> m_alloc;
+  size_t m_perBlock = kPerHugeBlock;
 };
 
 constexpr int kMaxDepth = 60;  // binary depth; the 8-wide tree is shallower, stacks hold 7 per level
@@ -436,7 +442,7 @@ private:
   /// take the element or an empty box by mask. Then the range is copied back.
   template <int Axis>
   void partitionScratch(const Range& range, const BinMap& map, int split, Range& left, Range& right) {
-    thread_local std::vector<PrimRef> scratch;  // kept: 2 MiB a thread
+    thread_local std::vector<PrimRef> scratch;  // kept for the thread's next builds
     const uint32_t n = range.end - range.begin;
     if (scratch.size() < n) scratch.resize(kScratchPartition);
     const PrimRef* src = refs.data() + range.begin;
@@ -803,7 +809,9 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
                       }
                     });
   if (anyInvalid)
-    refs.erase(std::remove_if(refs.begin(), refs.end(), [](const PrimRef& r) { return r.tagged() == PrimRef::kInvalid; }), refs.end());
+    refs.erase(std::remove_if(refs.begin(), refs.end(),
+                              [](const PrimRef& r) { return r.tagged() == PrimRef::kInvalid; }),
+               refs.end());
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
@@ -815,6 +823,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
     m_stats.buildSeconds = timer.seconds();
     return;
   }
+  builder.arena.expect(2 * refs.size());  // a binary tree of n leaves has 2n - 1 nodes
   BuildNode* root = builder.arena.make();
   builder.build(builder.rootRange(), 0, root);
 
