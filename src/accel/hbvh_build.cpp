@@ -225,8 +225,7 @@ struct BinMap {
 
 class Builder {
 public:
-  Builder(const HbvhBuildSettings& s, const std::vector<Vec3>& pos, const std::vector<UVec3>& tris, Progress* p)
-      : m_s(s), m_pos(pos), m_tris(tris), m_progress(p) {}
+  Builder(const HbvhBuildSettings& s, Progress* p) : m_s(s), m_progress(p) {}
 
   std::vector<PrimRef, HugePageAllocator<PrimRef>> refs;
   /// Build nodes (stable addresses; freed together: 337k nodes for the dragon were 337k
@@ -507,8 +506,6 @@ private:
   }
 
   const HbvhBuildSettings& m_s;
-  const std::vector<Vec3>& m_pos;
-  const std::vector<UVec3>& m_tris;
   Progress* m_progress;
 };
 
@@ -791,7 +788,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
-  Builder builder(s, positions, triangles, progress);
+  Builder builder(s, progress);
 
   // References for every triangle with finite, indexable vertices.
   // In parallel into every slot; a triangle that cannot be bounded leaves its slot invalid
