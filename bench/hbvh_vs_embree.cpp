@@ -506,10 +506,11 @@ int run(const Options& opt) {
   }
 
   // Tables.
-  std::printf("HBVH settings: bins %d, max leaf %d, sphere area ratio %.2f | nodes %llu, leaves %llu, sphere nodes "
-              "%llu, avg leaf %.2f, max depth %d, SAH %.2f\n",
+  std::printf("HBVH settings: bins %d, max leaf %d, sphere area ratio %.2f | nodes %llu (quantized %llu), leaves %llu, "
+              "sphere nodes %llu, avg leaf %.2f, max depth %d, SAH %.2f\n",
               opt.hbvh.binCount, opt.hbvh.maxLeafSize, double(opt.hbvh.sphereAreaRatio),
-              (unsigned long long)hs.nodes, (unsigned long long)hs.leaves, (unsigned long long)hs.sphereNodes,
+              (unsigned long long)hs.nodes, (unsigned long long)hs.quantizedNodes, (unsigned long long)hs.leaves,
+              (unsigned long long)hs.sphereNodes,
               hs.avgLeafSize, hs.maxDepth, hs.sahCost);
   std::printf("\n%-14s %10s %10s %12s\n", "build", "time ms", "MiB", "peak MiB");
   for (const BuildResult& b : builds) {
@@ -556,7 +557,8 @@ int run(const Options& opt) {
                           {"sphere_test_cost", opt.hbvh.sphereTestCost},
                           {"traversal_cost", opt.hbvh.traversalCost},
                           {"intersection_cost", opt.hbvh.intersectionCost},
-                          {"leaf_test_width", opt.hbvh.leafTestWidth}};
+                          {"leaf_test_width", opt.hbvh.leafTestWidth},
+                          {"quantize_below", opt.hbvh.quantizeBelow}};
     j["hbvh_stats"] = hs.toJson();
     j["build_ratio"] = buildRatio(builds);
     for (const BuildResult& b : builds)
@@ -608,6 +610,8 @@ int main(int argc, char** argv) {
   app.add_option("--traversal-cost", opt.hbvh.traversalCost, "HbvhBuildSettings::traversalCost")
       ->check(CLI::PositiveNumber);
   app.add_option("--leaf-test-width", opt.hbvh.leafTestWidth, "HbvhBuildSettings::leafTestWidth")->check(CLI::IsMember({4, 8}));
+  app.add_option("--quantize-below", opt.hbvh.quantizeBelow, "HbvhBuildSettings::quantizeBelow (0 = no quantized nodes)")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--intersection-cost", opt.hbvh.intersectionCost, "HbvhBuildSettings::intersectionCost")
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");

@@ -108,7 +108,7 @@ struct BuildNode {
   float cost = 0.0f;
   uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
   /// Of the 8-wide node collapsed from this one, where it is one (Hbvh::Flattener::measure):
-  /// its subtree's nodes, spheres and leaf packets.
+  /// its subtree's node slots (Hbvh::NodeSlot), spheres and leaf packets.
   uint32_t wideNodes = 0, wideSpheres = 0, widePackets = 0;
   static constexpr float kReachUnknown = -1.0f;
   bool leaf() const { return !kids; }
@@ -595,20 +595,31 @@ struct Hbvh::Flattener {
            sah(n.kids[1], rootArea, binaryNodes, leaves);
   }
 
+  /// Whether the 8-wide node collapsed from n (not the root) is a QNode: in a tree of at least
+  /// quantizeMinTriangles, a subtree of at most quantizeBelow triangles whose box's 255th part
+  /// stays finite in powers of two.
+  bool quantized(const BuildNode& n) const {
+    const HbvhBuildSettings& s = bvh.m_settings;
+    return refs.size() >= size_t(s.quantizeMinTriangles) && n.count <= uint32_t(s.quantizeBelow) &&
+           maxComponent(n.box.diagonal()) < 0x1p100f;
+  }
+
   /// Measure the collapse of inner node n (or of a lone leaf as the root's only child) into
-  /// n's wide counts; returns its depth in 8-wide levels.
-  int measure(BuildNode& n) {
+  /// n's wide counts, n written as a QNode where `quant`; returns its depth in 8-wide levels and
+  /// counts the QNodes.
+  int measure(BuildNode& n, bool quant, std::atomic<uint64_t>& qnodes) {
     const BuildNode* kids[kWidth];
     const int k = collapse(n, kids);
     int depths[kWidth] = {};
     // Kids are subtrees of n: measuring one writes only its own nodes.
     auto sub = [&](int i) {
-      if (!kids[i]->leaf()) depths[i] = measure(*const_cast<BuildNode*>(kids[i]));
+      if (!kids[i]->leaf()) depths[i] = measure(*const_cast<BuildNode*>(kids[i]), quantized(*kids[i]), qnodes);
     };
     if (n.count > parallelFill()) tbb::parallel_for(0, k, sub);
     else
       for (int i = 0; i < k; ++i) sub(i);
-    n.wideNodes = 1;
+    n.wideNodes = quant ? 1 : 2;
+    if (quant) ++qnodes;
     n.wideSpheres = n.widePackets = 0;
     int depth = 0;
     for (int i = 0; i < k; ++i) {
@@ -626,35 +637,72 @@ struct Hbvh::Flattener {
     return depth + 1;
   }
 
-  /// Write the collapse of n at node `node`, its kids' spheres from `sphere`, its leaves'
-  /// packets from `packet`, and its inner kids' subtrees after it, in kid order (the serial
-  /// depth-first layout: node, then each kid's subtree; spheres of this node's kids, then the
-  /// subtrees').
-  void fill(const BuildNode& n, uint32_t node, uint32_t sphere, uint32_t packet) {
+  /// The float the traversal computes for quantized plane q (enterBoxesQ): origin + q scale.
+  static float dequantize(float origin, float scale, int q) {
+    const float offset = float(q) * scale;  // exact: scale is a power of two
+    return origin + offset;
+  }
+  /// Quantize the kids' boxes into `out` relative to their union, each plane rounded outwards
+  /// so that the floats the traversal makes contain the kid's box (checked as it computes them).
+  static void quantize(const BuildNode* const* kids, int k, QNode& out) {
+    Bounds3 box;
+    for (int i = 0; i < k; ++i) box.extend(kids[i]->box);
+    for (int a = 0; a < 3; ++a) {
+      const float lo = box.lo[a], hi = box.hi[a];
+      // The smallest power of two whose 255 steps from lo reach hi, as the traversal adds.
+      int e;
+      std::frexp(std::max((hi - lo) / 255.0f, std::numeric_limits<float>::min()), &e);
+      float scale = std::ldexp(1.0f, e - 1);
+      while (dequantize(lo, scale, 255) < hi) scale *= 2.0f;
+      out.origin[a] = lo;
+      out.scale[a] = scale;
+      for (int i = 0; i < kWidth; ++i) {
+        int qlo = 255, qhi = 0;  // an empty slot (masked by `used` anyway)
+        if (i < k) {
+          const float cl = kids[i]->box.lo[a], ch = kids[i]->box.hi[a];
+          qlo = int(std::clamp(std::floor((cl - lo) / scale), 0.0f, 255.0f));
+          while (qlo > 0 && dequantize(lo, scale, qlo) > cl) --qlo;
+          while (qlo < 255 && dequantize(lo, scale, qlo + 1) <= cl) ++qlo;
+          qhi = int(std::clamp(std::ceil((ch - lo) / scale), float(qlo), 255.0f));
+          while (qhi < 255 && dequantize(lo, scale, qhi) < ch) ++qhi;
+          while (qhi > qlo && dequantize(lo, scale, qhi - 1) >= ch) --qhi;
+        }
+        out.lo[a][i] = uint8_t(qlo);
+        out.hi[a][i] = uint8_t(qhi);
+      }
+    }
+    out.used = (1u << k) - 1u;
+    out.pad[0] = out.pad[1] = out.pad[2] = 0;
+  }
+
+  /// Write the collapse of n at node slot `node` (a QNode where `quant`), its kids' spheres from
+  /// `sphere`, its leaves' packets from `packet`, and its inner kids' subtrees after it, in kid
+  /// order (the serial depth-first layout: node, then each kid's subtree; spheres of this node's
+  /// kids, then the subtrees').
+  void fill(const BuildNode& n, uint32_t node, uint32_t sphere, uint32_t packet, bool quant) {
     const BuildNode* kids[kWidth];
     const int k = collapse(n, kids);
     Node out;
+    QNode qout;
+    if (quant) quantize(kids, k, qout);
     for (int a = 0; a < 3; ++a)
       for (int i = 0; i < kWidth; ++i) {
-        out.lo[a][i] = kInf;
-        out.hi[a][i] = -kInf;
+        out.lo[a][i] = i < k ? kids[i]->box.lo[a] : kInf;  // an empty slot is never entered
+        out.hi[a][i] = i < k ? kids[i]->box.hi[a] : -kInf;
       }
-    out.sphereBase = sphere;
-    out.sphereMask = 0;
-    for (int i = 0; i < kWidth; ++i) out.child[i] = kLeafBit;  // empty slots are never entered
+    uint32_t sphereMask = 0;
+    const uint32_t sphereBase = sphere;
     for (int i = 0; i < k; ++i) {
-      for (int a = 0; a < 3; ++a) {
-        out.lo[a][i] = kids[i]->box.lo[a];
-        out.hi[a][i] = kids[i]->box.hi[a];
-      }
       Sphere s;
       if (fitSphere(*kids[i], s)) {
-        out.sphereMask |= 1u << i;
+        sphereMask |= 1u << i;
         bvh.m_spheres[sphere++] = Vec4(s.center, s.radius);
       }
     }
+    uint32_t child[kWidth];
+    for (int i = 0; i < kWidth; ++i) child[i] = kLeafBit;  // empty slots are never entered
     // Where each kid's part starts.
-    uint32_t nextNode = node + 1;
+    uint32_t nextNode = node + (quant ? 1 : 2);
     uint32_t starts[kWidth][3];  // node, sphere, packet
     for (int i = 0; i < k; ++i) {
       starts[i][0] = nextNode;
@@ -662,16 +710,26 @@ struct Hbvh::Flattener {
       starts[i][2] = packet;
       if (kids[i]->leaf()) {
         const uint32_t count = (kids[i]->count + 3u) / 4u;
-        out.child[i] = kLeafBit | ((count - 1u) << kCountShift) | packet;
+        child[i] = kLeafBit | ((count - 1u) << kCountShift) | packet;
         packet += count;
       } else {
-        out.child[i] = nextNode;
+        child[i] = nextNode | (quantized(*kids[i]) ? kQuantBit : 0u);
         nextNode += kids[i]->wideNodes;
         sphere += kids[i]->wideSpheres;
         packet += kids[i]->widePackets;
       }
     }
-    bvh.m_nodes[node] = out;
+    if (quant) {
+      std::copy(child, child + kWidth, qout.child);
+      qout.sphereBase = sphereBase;
+      qout.sphereMask = sphereMask;
+      new (&bvh.m_nodes[node]) QNode(qout);
+    } else {
+      std::copy(child, child + kWidth, out.child);
+      out.sphereBase = sphereBase;
+      out.sphereMask = sphereMask;
+      new (&bvh.m_nodes[node]) Node(out);
+    }
     auto kid = [&](int i) {
       const BuildNode& b = *kids[i];
       if (b.leaf()) {
@@ -679,7 +737,7 @@ struct Hbvh::Flattener {
         for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
         packLeaf(ids, b.count, reinterpret_cast<float*>(bvh.m_leaves.data() + starts[i][2]));
       } else {
-        fill(b, starts[i][0], starts[i][1], starts[i][2]);
+        fill(b, starts[i][0], starts[i][1], starts[i][2], quantized(b));
       }
     };
     if (n.count > parallelFill()) tbb::parallel_for(0, k, kid);
@@ -752,6 +810,7 @@ nlohmann::json HbvhStats::toJson() const {
   j["nodes"] = nodes;
   j["leaves"] = leaves;
   j["binary_nodes"] = binaryNodes;
+  j["quantized_nodes"] = quantizedNodes;
   j["sphere_nodes"] = sphereNodes;
   j["max_depth"] = maxDepth;
   j["sah_cost"] = sahCost;
@@ -774,7 +833,7 @@ Hbvh::Hbvh(const Scene& scene, const HbvhBuildSettings& settings, Progress* prog
 Bounds3 Hbvh::bounds() const {
   Bounds3 b;
   if (m_nodes.empty()) return b;
-  const Node& root = m_nodes[0];
+  const Node& root = *reinterpret_cast<const Node*>(m_nodes.data());
   for (int i = 0; i < kWidth; ++i)
     if (root.lo[0][i] <= root.hi[0][i]) {
       b.extend(Vec3(root.lo[0][i], root.lo[1][i], root.lo[2][i]));
@@ -791,6 +850,8 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");
+  if (s.quantizeBelow < 0 || s.quantizeMinTriangles < 0)
+    throw SettingsError("HBVH quantization thresholds must be at least 0");
   if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
   Timer timer;
   Builder builder(s, progress);
@@ -834,17 +895,20 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   uint64_t binaryNodes = 0, leaves = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);
   // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
-  m_stats.maxDepth = flat.measure(*root);
+  std::atomic<uint64_t> qnodes{0};
+  m_stats.maxDepth = flat.measure(*root, false, qnodes);  // the root is a full Node
+  if (root->wideNodes > kQuantBit) throw SettingsError("HBVH: too many nodes for 30-bit references");
   m_nodes.resize(root->wideNodes);
   m_spheres.resize(root->wideSpheres);
   m_leaves.resize(root->widePackets);
-  flat.fill(*root, 0, 0, 0);
-  m_stats.nodes = m_nodes.size();
+  flat.fill(*root, 0, 0, 0, false);
+  m_stats.quantizedNodes = qnodes;
+  m_stats.nodes = (m_nodes.size() + qnodes) / 2;  // two slots a Node, one a QNode
   m_stats.leaves = leaves;
   m_stats.binaryNodes = binaryNodes;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(Node) + m_spheres.size() * sizeof(Vec4) + m_leaves.size() * sizeof(LeafUnit);
+  m_stats.bytes = m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_leaves.size() * sizeof(LeafUnit);
   // Free the build trees before timing stops.
   builder.arena.clear();
   m_stats.buildSeconds = timer.seconds();

@@ -11,7 +11,12 @@ namespace voxcone {
 
 /// The arrays a traversal reads; nodes[0] is the root (the tree is not empty).
 struct HbvhArrays {
-  const Hbvh::Node* nodes;
+  const Hbvh::NodeSlot* nodes;
+  /// The node of a node reference (Hbvh::kQuantBit clear or set).
+  const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
+  const Hbvh::QNode& qnode(uint32_t ref) const {
+    return *reinterpret_cast<const Hbvh::QNode*>(nodes + (ref & ~Hbvh::kQuantBit));
+  }
   const Vec4* spheres;
   const float* leaves;  ///< Hbvh::LeafUnit's floats
   /// The first float of the leaf whose first unit is `unit`.

@@ -27,7 +27,7 @@ namespace {
 
 bool cpuRunsAvx2() {
 #ifdef VOXCONE_AVX2_KERNELS
-  return __builtin_cpu_supports("avx2");
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 #else
   return false;
 #endif

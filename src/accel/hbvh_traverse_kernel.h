@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <cstring>
 #include <new>
+#include <type_traits>
 
 namespace voxcone {
 namespace VOXCONE_ISA {
@@ -28,8 +29,10 @@ namespace VOXCONE_ISA {
 namespace {
 
 using Node = Hbvh::Node;
+using QNode = Hbvh::QNode;
 constexpr int kWidth = Hbvh::kWidth;
 constexpr uint32_t kLeafBit = Hbvh::kLeafBit, kCountShift = Hbvh::kCountShift, kSlotMask = Hbvh::kSlotMask;
+constexpr uint32_t kQuantBit = Hbvh::kQuantBit;
 
 /// 1 + 2 gamma(3) (Ize 2013, sec. 3.3).
 constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
@@ -39,8 +42,15 @@ using VFloat = __m256;  ///< one plane of all eight children
 inline VFloat broadcast(float x) { return _mm256_set1_ps(x); }
 inline VFloat load(const float* p) { return _mm256_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm256_store_ps(p, a); }
+inline VFloat add(VFloat a, VFloat b) { return _mm256_add_ps(a, b); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
+/// a b + c, rounded once: where a b is exact, the float of add(mul(a, b), c).
+inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm256_fmadd_ps(a, b, c); }
+/// Eight bytes from p as floats.
+inline VFloat loadBytes(const uint8_t* p) {
+  return _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+}
 inline VFloat imin(VFloat a, VFloat b) {
   return _mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
 }
@@ -56,8 +66,16 @@ using VFloat = __m128;  ///< one plane of four children (a node takes two)
 inline VFloat broadcast(float x) { return _mm_set1_ps(x); }
 inline VFloat load(const float* p) { return _mm_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
+inline VFloat add(VFloat a, VFloat b) { return _mm_add_ps(a, b); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
+inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
+/// Four bytes from p as floats.
+inline VFloat loadBytes(const uint8_t* p) {
+  int32_t bytes;
+  std::memcpy(&bytes, p, sizeof bytes);
+  return _mm_cvtepi32_ps(_mm_cvtepu8_epi32(_mm_cvtsi32_si128(bytes)));
+}
 inline VFloat imin(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_min_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
 inline VFloat imax(VFloat a, VFloat b) { return _mm_castsi128_ps(_mm_max_epi32(_mm_castps_si128(a), _mm_castps_si128(b))); }
 inline int lessEqualMask(VFloat a, VFloat b) {
@@ -136,10 +154,33 @@ inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, 
   return lessEqualMask(tNear, tFar);
 }
 
+/// enterBoxes for a QNode: each plane dequantized (origin + q scale, in float, as the build
+/// checked it), then the same slab test. A plane's bytes lie at a quarter of its floats' offset
+/// in a Node (lo[a] at 32 a bytes there, 8 a here; hi at 96 + 32 a, 24 + 8 a), from lo on.
+inline int enterBoxesQ(const QNode& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
+  const uint8_t* base = &n.lo[0][0] + first;
+  const auto plane = [&](const int64_t* offsets, int a) {
+    const VFloat q = loadBytes(base + (offsets[a] >> 2));
+    return mulAddExactProduct(q, broadcast(n.scale[a]), broadcast(n.origin[a]));  // q scale is exact
+  };
+  const auto slab = [&](const int64_t* offsets, const VFloat* inv, int a) {
+    return mul(sub(plane(offsets, a), rd.org[a]), inv[a]);
+  };
+  const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
+  const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
+  const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
+  const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
+  store(tNearOut + first, tNear);
+  return lessEqualMask(tNear, tFar);
+}
+static_assert(offsetof(Node, lo) == 0 && offsetof(Node, hi) == 4 * (offsetof(QNode, hi) - offsetof(QNode, lo)),
+              "a QNode's planes lie at a quarter of a Node's offsets");
+
 /// Children in `mask` that keep a sphere and whose sphere the ray misses (in [tMin, tMax]) are
 /// removed from it; tNear of the others becomes the later of the box's and the sphere's entry.
 /// Out of line: few nodes have spheres, and inlined it would crowd the box test's registers.
-[[gnu::noinline]] int cullSpheres(const Node& n, const Vec4* spheres, const Ray& ray, SphereRay& sr, int mask,
+template <class NodeT>
+[[gnu::noinline]] int cullSpheres(const NodeT& n, const Vec4* spheres, const Ray& ray, SphereRay& sr, int mask,
                                   float tMin, float tMax, float* tNear) {
   // Distance of closest approach along the unit direction (Haines et al., "Precision
   // Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7).
@@ -168,14 +209,20 @@ inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, 
 }
 
 /// Entry distances of the eight children and the mask of those entered.
-inline int enterChildren(const Node& n, const Vec4* spheres, const Ray& ray, const RayData& rd, SphereRay& sr,
+template <class NodeT>
+inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, const RayData& rd, SphereRay& sr,
                          float tMin, float tMax, float tNearOut[kWidth]) {
   const VFloat tMinV = broadcast(tMin), tMaxV = broadcast(tMax);
+  const auto boxes = [&](int first) {
+    if constexpr (std::is_same_v<NodeT, QNode>) return enterBoxesQ(n, first, rd, tMinV, tMaxV, tNearOut);
+    else return enterBoxes(n, first, rd, tMinV, tMaxV, tNearOut);
+  };
 #ifdef __AVX2__
-  int mask = enterBoxes(n, 0, rd, tMinV, tMaxV, tNearOut);
+  int mask = boxes(0);
 #else
-  int mask = enterBoxes(n, 0, rd, tMinV, tMaxV, tNearOut) | enterBoxes(n, 4, rd, tMinV, tMaxV, tNearOut) << 4;
+  int mask = boxes(0) | boxes(4) << 4;
 #endif
+  if constexpr (std::is_same_v<NodeT, QNode>) mask &= int(n.used);
   if (__builtin_expect((mask & n.sphereMask) != 0, 0))
     mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
   return mask;
@@ -202,15 +249,18 @@ struct LeafRay {
 inline uint32_t leafFirst(uint32_t ref) { return ref & kSlotMask; }
 inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountShift) + 1u; }
 
-/// Start loading the first four lines of what `c` refers to: a node, or a leaf's first packet.
-/// Always inlined (prefetchChildren, below, says why).
+/// Start loading what `c` refers to: a node's lines (four, a QNode's two), or a leaf's first
+/// four. Always inlined (prefetchChildren, below, says why).
 [[gnu::always_inline]] inline void prefetchRef(const HbvhArrays& bvh, uint32_t c) {
-  const char* p = (c & kLeafBit) ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
-                                 : reinterpret_cast<const char*>(bvh.nodes + c);
+  const bool leaf = c & kLeafBit;
+  const char* p = leaf ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
+                       : reinterpret_cast<const char*>(bvh.nodes + (c & ~kQuantBit));
   _mm_prefetch(p, _MM_HINT_T0);
   _mm_prefetch(p + 64, _MM_HINT_T0);
-  _mm_prefetch(p + 128, _MM_HINT_T0);
-  _mm_prefetch(p + 192, _MM_HINT_T0);
+  if (leaf || !(c & kQuantBit)) {
+    _mm_prefetch(p + 128, _MM_HINT_T0);
+    _mm_prefetch(p + 192, _MM_HINT_T0);
+  }
 }
 
 /// Start loading the entered children while their order is worked out: on the dragon a third
@@ -222,9 +272,9 @@ inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountS
 /// Always inlined: out of line, GCC 12 finds this function "looping pure" (it takes
 /// __builtin_prefetch for side-effect free) and deletes every call, and with them the prefetches
 /// (the binary had not one prefetcht0 until this attribute; dragon incoherent 0.82 -> 0.92).
-[[gnu::always_inline]] inline void prefetchChildren(const HbvhArrays& bvh, const Node& n, int mask) {
+[[gnu::always_inline]] inline void prefetchChildren(const HbvhArrays& bvh, const uint32_t* child, int mask) {
   for (; mask; mask &= mask - 1) {
-    const uint32_t c = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
+    const uint32_t c = child[__builtin_ctz(static_cast<unsigned>(mask))];
     prefetchRef(bvh, c);
     if (c & kLeafBit) {
       const char* p = reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)));
@@ -322,21 +372,22 @@ struct CompressTable {
 constexpr CompressTable kCompress;
 #endif
 
-/// Push the children of n in `mask` onto the stack at sp, in index order, without a branch per
+/// Push the children `child` (a node's) in `mask` onto the stack at sp, in index order, without a branch per
 /// child: one permutation packs them to the front of a register and one store writes all eight
 /// slots (the stack has room for them), of which sp keeps only the mask's.
-inline uint32_t* pushChildren(uint32_t* sp, const Node& n, int mask) {
+inline uint32_t* pushChildren(uint32_t* sp, const uint32_t* child, int mask) {
 #ifdef __AVX2__
   static_assert(offsetof(Node, child) % 32 == 0 && alignof(Node) % 32 == 0, "a node's refs are one aligned load");
+  static_assert(offsetof(QNode, child) % 32 == 0 && alignof(QNode) % 32 == 0, "a node's refs are one aligned load");
   // vpermd reads the low three bits of each index: the nibbles need no masking.
   const __m256i idx = _mm256_srlv_epi32(_mm256_set1_epi32(int(kCompress.lanes[mask])),
                                         _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
-  const __m256i refs = _mm256_load_si256(reinterpret_cast<const __m256i*>(n.child));
+  const __m256i refs = _mm256_load_si256(reinterpret_cast<const __m256i*>(child));
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(sp), _mm256_permutevar8x32_epi32(refs, idx));
   return sp + __builtin_popcount(static_cast<unsigned>(mask));
 #else
   for (int i = 0; i < kWidth; ++i) {
-    *sp = n.child[i];
+    *sp = child[i];
     sp += (mask >> i) & 1;
   }
   return sp;
@@ -384,7 +435,6 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   const RayData rd(ray);
   SphereRay sr;
   LeafRay leafRay;
-  const Node* const nodes = bvh.nodes;
   const Vec4* const spheres = bvh.spheres;
   const float tMin = ray.tMin;
   Hit hit;
@@ -397,10 +447,19 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   for (;;) {
     // Down the inner nodes to a leaf, or to a node none of whose children the ray enters.
     while (!(cur & kLeafBit)) {
-      const Node& n = nodes[cur];
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
-      int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+      const uint32_t* child;
+      int mask;
+      if (cur & kQuantBit) {
+        const QNode& n = bvh.qnode(cur);
+        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+        child = n.child;
+      } else {
+        const Node& n = bvh.node(cur);
+        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+        child = n.child;
+      }
       if (mask == 0) goto pop;
       // One child entered: go on with it; two: push the farther; three or four: push all, sort
       // them farthest first by a sorting network and pop the nearest; more: insertion sort (as
@@ -408,25 +467,25 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       const int i0 = __builtin_ctz(static_cast<unsigned>(mask));
       mask &= mask - 1;
       if (mask == 0) {
-        cur = n.child[i0];
+        cur = child[i0];
         continue;
       }
-      prefetchChildren(bvh, n, mask | (1 << i0));
+      prefetchChildren(bvh, child, mask | (1 << i0));
       const int i1 = __builtin_ctz(static_cast<unsigned>(mask));
       mask &= mask - 1;
       if (mask == 0) {
         const bool firstNearer = tNear[i0] <= tNear[i1];
         const int nearI = firstNearer ? i0 : i1, farI = firstNearer ? i1 : i0;
-        *sp++ = makeEntry(n.child[farI], tNear[farI]);
-        cur = n.child[nearI];
+        *sp++ = makeEntry(child[farI], tNear[farI]);
+        cur = child[nearI];
         continue;
       }
       Entry* const base = sp;
-      *sp++ = makeEntry(n.child[i0], tNear[i0]);
-      *sp++ = makeEntry(n.child[i1], tNear[i1]);
+      *sp++ = makeEntry(child[i0], tNear[i0]);
+      *sp++ = makeEntry(child[i1], tNear[i1]);
       for (; mask; mask &= mask - 1) {
         const int i = __builtin_ctz(static_cast<unsigned>(mask));
-        *sp++ = makeEntry(n.child[i], tNear[i]);
+        *sp++ = makeEntry(child[i], tNear[i]);
       }
       const long count = sp - base;
       if (count == 3) {
@@ -472,7 +531,6 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
   const RayData rd(ray);
   SphereRay sr;
   LeafRay leafRay;
-  const Node* const nodes = bvh.nodes;
   const Vec4* const spheres = bvh.spheres;
   const float tMin = ray.tMin;
   uint32_t stack[kStackSize];
@@ -480,14 +538,23 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
   uint32_t cur = 0;
   for (;;) {
     while (!(cur & kLeafBit)) {
-      const Node& n = nodes[cur];
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
-      int mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+      const uint32_t* child;
+      int mask;
+      if (cur & kQuantBit) {
+        const QNode& n = bvh.qnode(cur);
+        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+        child = n.child;
+      } else {
+        const Node& n = bvh.node(cur);
+        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
+        child = n.child;
+      }
       if (mask == 0) goto pop;
       // Any hit ends the query, so order does not matter: take the first, push the rest.
-      cur = n.child[__builtin_ctz(static_cast<unsigned>(mask))];
-      sp = pushChildren(sp, n, mask & (mask - 1));
+      cur = child[__builtin_ctz(static_cast<unsigned>(mask))];
+      sp = pushChildren(sp, child, mask & (mask - 1));
     }
     {
       VOXCONE_COUNT(leaves, 1);

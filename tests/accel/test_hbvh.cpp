@@ -128,13 +128,17 @@ struct Variant {
   std::function<std::unique_ptr<Accel>(const Soup&)> build;
 };
 
+constexpr int kAllQuantized = 1 << 30, kNoneQuantized = 0;  ///< HbvhBuildSettings::quantizeBelow
+
 std::vector<Variant> variants() {
-  auto hbvh = [](float ratio, int leaf, Hbvh::Simd simd = Hbvh::hostSimd()) {
+  auto hbvh = [](float ratio, int leaf, Hbvh::Simd simd = Hbvh::hostSimd(), int quantizeBelow = kAllQuantized) {
     return [=](const Soup& s) {
       HbvhBuildSettings settings;
       settings.sphereAreaRatio = ratio;
       settings.sphereTestCost = 0.0f;  // by area alone: spheres wherever the ratio allows
       settings.maxLeafSize = leaf;
+      settings.quantizeBelow = quantizeBelow;
+      settings.quantizeMinTriangles = 0;
       auto bvh = std::make_unique<Hbvh>(s.pos, s.tris, settings);
       if (ratio > 1.0f && s.tris.size() > 8) {
         EXPECT_GT(bvh->stats().sphereNodes, 0u) << s.name;
@@ -152,16 +156,25 @@ std::vector<Variant> variants() {
       return std::unique_ptr<Accel>(std::make_unique<KdTree>(s.pos, s.tris, settings));
     };
   };
-  // A plain AABB BVH, the hybrid, spheres on every node with small leaves; the kd-tree as
-  // built by default and pushed to deep trees of many straddling references.
+  // A plain AABB BVH, the hybrid, spheres on every node with small leaves, each with every node
+  // but the root quantized; the hybrid with full nodes only, and with full nodes above quantized
+  // ones (as large scenes are built by default); the kd-tree as built by default and pushed to
+  // deep trees of many straddling references.
   // The HBVH with the host's kernels (AVX2 where the CPU has it) and, where those are not SSE,
   // once more with the SSE kernels forced.
-  std::vector<Variant> v = {{"bvh", hbvh(0.0f, 8)},      {"hbvh", hbvh(1.0f, 8)},
-                            {"hbvh-all-spheres", hbvh(100.0f, 2)}, {"kdtree", kd(32, 8, 1.0f)},
+  const Hbvh::Simd host = Hbvh::hostSimd();
+  std::vector<Variant> v = {{"bvh", hbvh(0.0f, 8)},
+                            {"hbvh", hbvh(1.0f, 8)},
+                            {"hbvh-all-spheres", hbvh(100.0f, 2)},
+                            {"hbvh-full-nodes", hbvh(1.0f, 8, host, kNoneQuantized)},
+                            {"hbvh-all-spheres-full-nodes", hbvh(100.0f, 2, host, kNoneQuantized)},
+                            {"hbvh-quantized-below-64", hbvh(1.0f, 8, host, 64)},
+                            {"kdtree", kd(32, 8, 1.0f)},
                             {"kdtree-deep", kd(7, 1, 20.0f)}};
-  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) {
+  if (host != Hbvh::Simd::Sse42) {
     v.push_back({"hbvh-sse4.2", hbvh(1.0f, 8, Hbvh::Simd::Sse42)});
     v.push_back({"hbvh-all-spheres-sse4.2", hbvh(100.0f, 2, Hbvh::Simd::Sse42)});
+    v.push_back({"hbvh-full-nodes-sse4.2", hbvh(1.0f, 8, Hbvh::Simd::Sse42, kNoneQuantized)});
   }
   return v;
 }
@@ -300,6 +313,22 @@ TEST(Hbvh, StatsAreConsistent) {
   EXPECT_GT(st.sahCost, 1.0);
   EXPECT_GT(st.bytes, 5000u * 40u);
   EXPECT_LE(st.avgLeafSize, 8.0);
+  // A mesh this small keeps full nodes by default; quantized, every node but the root takes 128
+  // bytes instead of 256, and the tree is the same.
+  EXPECT_EQ(st.quantizedNodes, 0u);
+  HbvhBuildSettings quantized;
+  quantized.quantizeBelow = 1 << 30;
+  quantized.quantizeMinTriangles = 0;
+  const Hbvh qbvh(s.pos, s.tris, quantized);
+  EXPECT_EQ(qbvh.stats().quantizedNodes, st.nodes - 1);
+  EXPECT_EQ(qbvh.stats().nodes, st.nodes);
+  EXPECT_EQ(qbvh.stats().leaves, st.leaves);
+  EXPECT_EQ(st.bytes - qbvh.stats().bytes, (st.nodes - 1) * 128u);
+  // Quantized below 64 triangles: the lowest levels only.
+  quantized.quantizeBelow = 64;
+  const Hbvh lowBvh(s.pos, s.tris, quantized);
+  EXPECT_GT(lowBvh.stats().quantizedNodes, st.nodes / 2);
+  EXPECT_LT(lowBvh.stats().quantizedNodes, st.nodes - 1);
 }
 
 TEST(Accel, BuildIsIdenticalAtAnyThreadCount) {
@@ -393,10 +422,12 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
   for (const Soup& s : {sphereSoup(3), randomSoup(3000, 13), cornellSoup()}) {
     Bounds3 b;
     for (const Vec3& p : s.pos) b.extend(p);
-    for (float ratio : {1.0f, 100.0f}) {
+    for (const auto& [ratio, quantizeBelow] : {std::pair{1.0f, 0}, {100.0f, 0}, {1.0f, 1 << 30}, {100.0f, 1 << 30}}) {
       HbvhBuildSettings settings;
       settings.sphereAreaRatio = ratio;
       settings.sphereTestCost = 0.0f;
+      settings.quantizeBelow = quantizeBelow;
+      settings.quantizeMinTriangles = 0;
       Hbvh avx(s.pos, s.tris, settings), sse(s.pos, s.tris, settings);
       avx.setSimd(Hbvh::Simd::Avx2);
       sse.setSimd(Hbvh::Simd::Sse42);
@@ -412,8 +443,58 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
         const float tOcc = a ? a->t : r.tMax;
         if (avx.occluded(r, tOcc) != sse.occluded(r, tOcc)) ++differ;
       }
-      EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio;
+      EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio << " quantized below " << quantizeBelow;
       EXPECT_GT(hits, 5000) << s.name;
+    }
+  }
+}
+
+TEST(Hbvh, QuantizedNodesFindWhatFullNodesFind) {
+  // The same tree with full and with quantized child boxes: the quantized boxes contain the full
+  // ones as the kernels compute them, so every ray finds the same closest hit (up to the float
+  // ties of a shared edge or vertex, whose winner follows the order of the visit, as against
+  // brute force) and the same occlusion. The meshes as they are and moved far from the origin
+  // and shrunk, where a plane's rounding (origin + q scale) is large against a quantization
+  // step; both kernels, with and without spheres.
+  std::vector<Hbvh::Simd> kernels = {Hbvh::Simd::Sse42};
+  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) kernels.push_back(Hbvh::hostSimd());
+  for (const Soup& mesh : {randomSoup(3000, 21), gridSoup(40), cornellSoup()}) {
+    for (const float scale : {1.0f, 0.05f}) {
+      Soup s = mesh;
+      if (scale != 1.0f) {
+        for (Vec3& p : s.pos) p = Vec3(300.0f, -70.0f, 1100.0f) + scale * p;
+        s.name += "-far-small";
+      }
+      Bounds3 b;
+      for (const Vec3& p : s.pos) b.extend(p);
+      for (float ratio : {1.0f, 100.0f}) {
+        HbvhBuildSettings settings;
+        settings.sphereAreaRatio = ratio;
+        settings.sphereTestCost = 0.0f;
+        settings.quantizeBelow = 0;
+        Hbvh full(s.pos, s.tris, settings);
+        settings.quantizeBelow = 1 << 30;
+        settings.quantizeMinTriangles = 0;
+        Hbvh quantized(s.pos, s.tris, settings);
+        ASSERT_EQ(quantized.stats().quantizedNodes, quantized.stats().nodes - 1);
+        for (Hbvh::Simd simd : kernels) {
+          full.setSimd(simd);
+          quantized.setSimd(simd);
+          Rng rng(23, 0);
+          int hits = 0, differ = 0;
+          for (int i = 0; i < 100000; ++i) {
+            const Ray r = makeRay(s, b, rng);
+            const auto a = full.intersect(r), q = quantized.intersect(r);
+            hits += a.has_value();
+            if (a.has_value() != q.has_value() || (a && !sameHitDistance(a->t, q->t))) ++differ;
+            const float tOcc = a ? a->t * (0.5f + rng.uniform()) : r.tMax;
+            if (a && sameHitDistance(a->t, tOcc)) continue;
+            if (full.occluded(r, tOcc) != quantized.occluded(r, tOcc)) ++differ;
+          }
+          EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio << " " << Hbvh::simdName(simd);
+          EXPECT_GT(hits, 10000) << s.name;
+        }
+      }
     }
   }
 }
