@@ -684,12 +684,15 @@ struct Hbvh::Flattener {
     const int k = collapse(n, kids);
     Node out;
     QNode qout;
-    if (quant) quantize(kids, k, qout);
-    for (int a = 0; a < 3; ++a)
-      for (int i = 0; i < kWidth; ++i) {
-        out.lo[a][i] = i < k ? kids[i]->box.lo[a] : kInf;  // an empty slot is never entered
-        out.hi[a][i] = i < k ? kids[i]->box.hi[a] : -kInf;
-      }
+    if (quant) {
+      quantize(kids, k, qout);
+    } else {
+      for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < kWidth; ++i) {
+          out.lo[a][i] = i < k ? kids[i]->box.lo[a] : kInf;  // an empty slot is never entered
+          out.hi[a][i] = i < k ? kids[i]->box.hi[a] : -kInf;
+        }
+    }
     uint32_t sphereMask = 0;
     const uint32_t sphereBase = sphere;
     for (int i = 0; i < k; ++i) {

@@ -12,7 +12,7 @@ namespace voxcone {
 /// The arrays a traversal reads; nodes[0] is the root (the tree is not empty).
 struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
-  /// The node of a node reference (Hbvh::kQuantBit clear or set).
+  /// The node a node reference refers to: a Node (Hbvh::kQuantBit clear) or a QNode (set).
   const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
   const Hbvh::QNode& qnode(uint32_t ref) const {
     return *reinterpret_cast<const Hbvh::QNode*>(nodes + (ref & ~Hbvh::kQuantBit));

@@ -42,7 +42,6 @@ using VFloat = __m256;  ///< one plane of all eight children
 inline VFloat broadcast(float x) { return _mm256_set1_ps(x); }
 inline VFloat load(const float* p) { return _mm256_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm256_store_ps(p, a); }
-inline VFloat add(VFloat a, VFloat b) { return _mm256_add_ps(a, b); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
 /// a b + c, rounded once: where a b is exact, the float of add(mul(a, b), c).
@@ -66,7 +65,6 @@ using VFloat = __m128;  ///< one plane of four children (a node takes two)
 inline VFloat broadcast(float x) { return _mm_set1_ps(x); }
 inline VFloat load(const float* p) { return _mm_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
-inline VFloat add(VFloat a, VFloat b) { return _mm_add_ps(a, b); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
 inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
@@ -228,6 +226,21 @@ inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, co
   return mask;
 }
 
+/// enterChildren for the node `ref` refers to (a QNode where kQuantBit is set); `child` gets the
+/// node's child references.
+[[gnu::always_inline]] inline int enterNode(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const RayData& rd,
+                                            SphereRay& sr, float tMin, float tMax, float tNearOut[kWidth],
+                                            const uint32_t*& child) {
+  if (ref & kQuantBit) {
+    const QNode& n = bvh.qnode(ref);
+    child = n.child;
+    return enterChildren(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
+  }
+  const Node& n = bvh.node(ref);
+  child = n.child;
+  return enterChildren(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
+}
+
 /// The packet test's constants, made at a ray's first leaf: most primary rays (62% miss the
 /// dragon) never reach one.
 struct LeafRay {
@@ -372,9 +385,9 @@ struct CompressTable {
 constexpr CompressTable kCompress;
 #endif
 
-/// Push the children `child` (a node's) in `mask` onto the stack at sp, in index order, without a branch per
-/// child: one permutation packs them to the front of a register and one store writes all eight
-/// slots (the stack has room for them), of which sp keeps only the mask's.
+/// Push a node's children `child` in `mask` onto the stack at sp, in index order, without a
+/// branch per child: one permutation packs them to the front of a register and one store writes
+/// all eight slots (the stack has room for them), of which sp keeps only the mask's.
 inline uint32_t* pushChildren(uint32_t* sp, const uint32_t* child, int mask) {
 #ifdef __AVX2__
   static_assert(offsetof(Node, child) % 32 == 0 && alignof(Node) % 32 == 0, "a node's refs are one aligned load");
@@ -435,7 +448,6 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   const RayData rd(ray);
   SphereRay sr;
   LeafRay leafRay;
-  const Vec4* const spheres = bvh.spheres;
   const float tMin = ray.tMin;
   Hit hit;
   float tMax = ray.tMax;
@@ -450,16 +462,7 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
       const uint32_t* child;
-      int mask;
-      if (cur & kQuantBit) {
-        const QNode& n = bvh.qnode(cur);
-        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
-        child = n.child;
-      } else {
-        const Node& n = bvh.node(cur);
-        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
-        child = n.child;
-      }
+      int mask = enterNode(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
       if (mask == 0) goto pop;
       // One child entered: go on with it; two: push the farther; three or four: push all, sort
       // them farthest first by a sorting network and pop the nearest; more: insertion sort (as
@@ -531,7 +534,6 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
   const RayData rd(ray);
   SphereRay sr;
   LeafRay leafRay;
-  const Vec4* const spheres = bvh.spheres;
   const float tMin = ray.tMin;
   uint32_t stack[kStackSize];
   uint32_t* sp = stack;
@@ -541,16 +543,7 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
       const uint32_t* child;
-      int mask;
-      if (cur & kQuantBit) {
-        const QNode& n = bvh.qnode(cur);
-        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
-        child = n.child;
-      } else {
-        const Node& n = bvh.node(cur);
-        mask = enterChildren(n, spheres, ray, rd, sr, tMin, tMax, tNear);
-        child = n.child;
-      }
+      int mask = enterNode(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
       if (mask == 0) goto pop;
       // Any hit ends the query, so order does not matter: take the first, push the rest.
       cur = child[__builtin_ctz(static_cast<unsigned>(mask))];

@@ -84,15 +84,16 @@ public:
   struct alignas(64) Node {
     float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][kWidth];
-    uint32_t child[kWidth];  ///< node index, or kLeafBit | (packets - 1) << kCountShift | first LeafUnit
+    uint32_t child[kWidth];  ///< node slot (| kQuantBit: a QNode's), or kLeafBit | (packets - 1) << kCountShift | first LeafUnit
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
   /// 8-wide node with quantized child boxes, 128 bytes: child i's box on axis a is
   /// [origin[a] + lo[a][i] scale[a], origin[a] + hi[a][i] scale[a]], each computed in float as
   /// written (scale a power of two, so the product is exact and only the sum rounds); the build
-  /// chooses lo and hi so that those floats contain the child's box. Children refs first, so
-  /// that a node's first line holds what the box test reads besides the planes (second line).
+  /// chooses lo and hi so that those floats contain the child's box. The child references share
+  /// the first line with origin and scale, which the box test reads with the planes (second
+  /// line), so both lines are loaded at once.
   struct alignas(64) QNode {
     uint32_t child[kWidth];  ///< as Node::child
     float origin[3];
