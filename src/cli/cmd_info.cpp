@@ -52,8 +52,9 @@ void addInfoCommand(CLI::App& app) {
     for (const ShapeInfo& s : scene.shapes)
       std::printf("  shape %-20s %9u triangles  %s%s\n", s.name.c_str(), s.triangleCount,
                   scene.materials[scene.triMaterial[s.firstTriangle]].name.c_str(), s.smoothNormals ? "  smooth" : "");
-    std::printf("hbvh        nodes %llu  leaves %llu  spheres %llu  depth %d  SAH %.2f  leaf %.2f tris  %.2f MiB  build %.3f s  kernels %s\n",
-                (unsigned long long)h.nodes, (unsigned long long)h.leaves, (unsigned long long)h.sphereNodes,
+    std::printf("hbvh        nodes %llu (quantized %llu)  leaves %llu  spheres %llu  depth %d  SAH %.2f  leaf %.2f tris  %.2f MiB  build %.3f s  kernels %s\n",
+                (unsigned long long)h.nodes, (unsigned long long)h.quantizedNodes, (unsigned long long)h.leaves,
+                (unsigned long long)h.sphereNodes,
                 h.maxDepth, h.sahCost, h.avgLeafSize, double(h.bytes) / (1024.0 * 1024.0), h.buildSeconds,
                 Hbvh::simdName(accel.simd()));
   });

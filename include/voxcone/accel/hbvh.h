@@ -5,7 +5,8 @@
 /// both to enter a node.
 /// Built binary, then collapsed to eight children per node whose boxes are tested together: with
 /// one AVX2 register per plane where the CPU has it, as two SSE halves where not (the layout of
-/// Embree's BVH8; the kernel is chosen at run time, so one binary runs on any x86-64).
+/// Embree's BVH8; the kernel is chosen at run time, so one binary runs on any x86-64). In large
+/// trees the lowest nodes keep their children's boxes quantized to 8 bits a plane (QNode).
 /// Layout as in Embree's kernels/bvh: build settings and statistics are structs of their own,
 /// the split heuristic (hbvh_build.cpp), traversal (hbvh_traverse.cpp) and the primitive test
 /// (triangle.h) live apart.
