@@ -722,17 +722,14 @@ struct Hbvh::Flattener {
         packet += kids[i]->widePackets;
       }
     }
-    if (quant) {
-      std::copy(child, child + kWidth, qout.child);
-      qout.sphereBase = sphereBase;
-      qout.sphereMask = sphereMask;
-      new (&bvh.m_nodes[node]) QNode(qout);
-    } else {
-      std::copy(child, child + kWidth, out.child);
-      out.sphereBase = sphereBase;
-      out.sphereMask = sphereMask;
-      new (&bvh.m_nodes[node]) Node(out);
-    }
+    const auto write = [&](auto& made) {  // a Node or a QNode, into its slot(s)
+      std::copy(child, child + kWidth, made.child);
+      made.sphereBase = sphereBase;
+      made.sphereMask = sphereMask;
+      new (&bvh.m_nodes[node]) std::decay_t<decltype(made)>(made);
+    };
+    if (quant) write(qout);
+    else write(out);
     auto kid = [&](int i) {
       const BuildNode& b = *kids[i];
       if (b.leaf()) {

@@ -131,25 +131,33 @@ struct SphereRay {
   }
 };
 
-/// The slab test of the children from `first` on, one register wide: their entry distances
-/// into tNearOut[first..] and the mask of those entered, from bit 0.
+/// The slab test of one register's width of children, `plane(offset, axis)` loading the plane
+/// at a Node's byte offset `offset` (RayData's near and far offsets): their entry distances into
+/// tNearOut and the mask of those entered, from bit 0.
 /// Distances are ordered as 32-bit integers (one cycle a minimum, against four for floats; as
 /// Embree's kernels do), which orders floats of which one at least is not negative: the entry
 /// distance is the largest of the planes' and tMin >= 0 (Hbvh::intersect clamps it), so it is
 /// the float maximum; an exit distance is the float minimum where all are >= 0, and a negative
 /// one where any is, which no entry distance is at or below (a box left at t = -0, where -0
 /// orders below +0, holds nothing in the open interval (tMin, tMax)).
-inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
-  const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
+template <class Plane>
+[[gnu::always_inline]] inline int slabTest(Plane plane, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const auto slab = [&](const int64_t* offsets, const VFloat* inv, int a) {
-    return mul(sub(load(reinterpret_cast<const float*>(base + offsets[a])), rd.org[a]), inv[a]);
+    return mul(sub(plane(offsets[a], a), rd.org[a]), inv[a]);
   };
   const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
   const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
   const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
   const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
-  store(tNearOut + first, tNear);
+  store(tNearOut, tNear);
   return lessEqualMask(tNear, tFar);
+}
+
+/// The slab test of a Node's children from `first` on (tNearOut[first..]).
+inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
+  const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
+  const auto plane = [&](int64_t offset, int) { return load(reinterpret_cast<const float*>(base + offset)); };
+  return slabTest(plane, rd, tMin, tMax, tNearOut + first);
 }
 
 /// enterBoxes for a QNode: each plane dequantized (origin + q scale, in float, as the build
@@ -157,19 +165,11 @@ inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, 
 /// in a Node (lo[a] at 32 a bytes there, 8 a here; hi at 96 + 32 a, 24 + 8 a), from lo on.
 inline int enterBoxesQ(const QNode& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const uint8_t* base = &n.lo[0][0] + first;
-  const auto plane = [&](const int64_t* offsets, int a) {
-    const VFloat q = loadBytes(base + (offsets[a] >> 2));
+  const auto plane = [&](int64_t offset, int a) {
+    const VFloat q = loadBytes(base + (offset >> 2));
     return mulAddExactProduct(q, broadcast(n.scale[a]), broadcast(n.origin[a]));  // q scale is exact
   };
-  const auto slab = [&](const int64_t* offsets, const VFloat* inv, int a) {
-    return mul(sub(plane(offsets, a), rd.org[a]), inv[a]);
-  };
-  const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
-  const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
-  const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
-  const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
-  store(tNearOut + first, tNear);
-  return lessEqualMask(tNear, tFar);
+  return slabTest(plane, rd, tMin, tMax, tNearOut + first);
 }
 static_assert(offsetof(Node, lo) == 0 && offsetof(Node, hi) == 4 * (offsetof(QNode, hi) - offsetof(QNode, lo)),
               "a QNode's planes lie at a quarter of a Node's offsets");
