@@ -108,8 +108,9 @@ struct BuildNode {
   float cost = 0.0f;
   uint32_t first = 0, count = 0;  // range in the ref array (for inner nodes: of the subtree)
   /// Of the 8-wide node collapsed from this one, where it is one (Hbvh::Flattener::measure):
-  /// its subtree's node slots (Hbvh::NodeSlot), spheres and leaf packets.
-  uint32_t wideNodes = 0, wideSpheres = 0, widePackets = 0;
+  /// its subtree's node slots (Hbvh::NodeSlot), spheres and block units (Hbvh::kUnitBytes: its
+  /// QNodes and leaves, an even number).
+  uint32_t wideNodes = 0, wideSpheres = 0, wideUnits = 0;
   static constexpr float kReachUnknown = -1.0f;
   bool leaf() const { return !kids; }
 };
@@ -579,6 +580,13 @@ struct Hbvh::Flattener {
       put(out, kPairStride, first);
     if (packets & 1u) put(out, kSingleStride, first);
   }
+  static constexpr uint32_t kQNodeUnits = sizeof(QNode) / kUnitBytes;
+  static constexpr uint32_t kLineUnits = sizeof(BlockLine) / kUnitBytes;
+  static constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes;
+  /// Block units of leaf n's packets.
+  static uint32_t leafUnits(const BuildNode& n) { return (n.count + 3u) / 4u * kPacketUnits; }
+  static uint64_t roundToLine(uint64_t units) { return (units + kLineUnits - 1) / kLineUnits * kLineUnits; }
+
   /// Subtrees of more triangles than the build's parallel threshold are measured and filled
   /// as parallel tasks.
   uint32_t parallelFill() const { return uint32_t(bvh.m_settings.parallelThreshold); }
@@ -618,22 +626,28 @@ struct Hbvh::Flattener {
     if (n.count > parallelFill()) tbb::parallel_for(0, k, sub);
     else
       for (int i = 0; i < k; ++i) sub(i);
-    n.wideNodes = quant ? 1 : 2;
+    // The layout fill writes: the node (a Node in m_nodes, a QNode in m_blocks), its leaves'
+    // units, padding to a line, its inner kids' parts (each whole lines).
+    n.wideNodes = quant ? 0 : 2;
     if (quant) ++qnodes;
-    n.wideSpheres = n.widePackets = 0;
+    uint64_t units = quant ? kQNodeUnits : 0;
+    for (int i = 0; i < k; ++i)
+      if (kids[i]->leaf()) units += leafUnits(*kids[i]);
+    units = roundToLine(units);
+    n.wideSpheres = 0;
     int depth = 0;
     for (int i = 0; i < k; ++i) {
       Sphere sphere;
       if (fitSphere(*kids[i], sphere)) ++n.wideSpheres;
-      if (kids[i]->leaf()) {
-        n.widePackets += (kids[i]->count + 3u) / 4u;
-      } else {
+      if (!kids[i]->leaf()) {
         n.wideNodes += kids[i]->wideNodes;
         n.wideSpheres += kids[i]->wideSpheres;
-        n.widePackets += kids[i]->widePackets;
+        units += kids[i]->wideUnits;
         depth = std::max(depth, depths[i]);
       }
     }
+    // 2^32 units are 128 GiB: build() refuses far less (leaf references hold 2^27 units).
+    n.wideUnits = uint32_t(std::min<uint64_t>(units, UINT32_MAX - 1u));
     return depth + 1;
   }
 
@@ -675,11 +689,12 @@ struct Hbvh::Flattener {
     out.pad[0] = out.pad[1] = out.pad[2] = 0;
   }
 
-  /// Write the collapse of n at node slot `node` (a QNode where `quant`), its kids' spheres from
-  /// `sphere`, its leaves' packets from `packet`, and its inner kids' subtrees after it, in kid
-  /// order (the serial depth-first layout: node, then each kid's subtree; spheres of this node's
-  /// kids, then the subtrees').
-  void fill(const BuildNode& n, uint32_t node, uint32_t sphere, uint32_t packet, bool quant) {
+  /// Write the collapse of n: a Node at slot `node`, or where `quant` a QNode at block unit
+  /// `unit` (a line's first); its kids' spheres from `sphere`; its leaves' packets from `unit`
+  /// (after the QNode), and its inner kids' parts after them, in kid order, each from a line
+  /// (measure's layout: depth first in both arrays; spheres of this node's kids, then the
+  /// subtrees').
+  void fill(const BuildNode& n, uint32_t node, uint32_t sphere, uint32_t unit, bool quant) {
     const BuildNode* kids[kWidth];
     const int k = collapse(n, kids);
     Node out;
@@ -704,38 +719,43 @@ struct Hbvh::Flattener {
     }
     uint32_t child[kWidth];
     for (int i = 0; i < kWidth; ++i) child[i] = kLeafBit;  // empty slots are never entered
-    // Where each kid's part starts.
-    uint32_t nextNode = node + (quant ? 1 : 2);
-    uint32_t starts[kWidth][3];  // node, sphere, packet
-    for (int i = 0; i < k; ++i) {
-      starts[i][0] = nextNode;
-      starts[i][1] = sphere;
-      starts[i][2] = packet;
+    // Where each kid's part starts: the leaves' packets, then from a line the inner kids'.
+    const uint32_t self = unit;
+    uint32_t nextNode = node + (quant ? 0 : 2);
+    unit += quant ? kQNodeUnits : 0;
+    uint32_t starts[kWidth][3];  // node, sphere, unit
+    for (int i = 0; i < k; ++i)
       if (kids[i]->leaf()) {
-        const uint32_t count = (kids[i]->count + 3u) / 4u;
-        child[i] = kLeafBit | ((count - 1u) << kCountShift) | packet;
-        packet += count;
-      } else {
-        child[i] = nextNode | (quantized(*kids[i]) ? kQuantBit : 0u);
+        child[i] = kLeafBit | ((kids[i]->count + 3u) / 4u - 1u) << kCountShift | unit;
+        starts[i][2] = unit;
+        unit += leafUnits(*kids[i]);
+      }
+    unit = uint32_t(roundToLine(unit));
+    for (int i = 0; i < k; ++i)
+      if (!kids[i]->leaf()) {
+        const bool q = quantized(*kids[i]);
+        child[i] = q ? kQuantBit | unit / kLineUnits : nextNode;
+        starts[i][0] = nextNode;
+        starts[i][1] = sphere;
+        starts[i][2] = unit;
         nextNode += kids[i]->wideNodes;
         sphere += kids[i]->wideSpheres;
-        packet += kids[i]->widePackets;
+        unit += kids[i]->wideUnits;
       }
-    }
-    const auto write = [&](auto& made) {  // a Node or a QNode, into its slot(s)
+    const auto write = [&](auto& made, void* at) {  // a Node or a QNode, into its place
       std::copy(child, child + kWidth, made.child);
       made.sphereBase = sphereBase;
       made.sphereMask = sphereMask;
-      new (&bvh.m_nodes[node]) std::decay_t<decltype(made)>(made);
+      new (at) std::decay_t<decltype(made)>(made);
     };
-    if (quant) write(qout);
-    else write(out);
+    if (quant) write(qout, bvh.m_blocks.data() + self / kLineUnits);
+    else write(out, bvh.m_nodes.data() + node);
     auto kid = [&](int i) {
       const BuildNode& b = *kids[i];
       if (b.leaf()) {
         uint32_t ids[64];  // maxLeafSize <= 64
         for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
-        packLeaf(ids, b.count, reinterpret_cast<float*>(bvh.m_leaves.data() + starts[i][2]));
+        packLeaf(ids, b.count, reinterpret_cast<float*>(reinterpret_cast<unsigned char*>(bvh.m_blocks.data()) + size_t(starts[i][2]) * kUnitBytes));
       } else {
         fill(b, starts[i][0], starts[i][1], starts[i][2], quantized(b));
       }
@@ -845,14 +865,14 @@ Bounds3 Hbvh::bounds() const {
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
-  static_assert((kLeafBit >> kCountShift) == 64, "packet counts 1..64 must fit between the leaf bit and the slot");
+  static_assert((kLeafBit >> kCountShift) == 16, "packet counts 1..16 must fit between the leaf bit and the unit");
   static_assert(sizeof(LeafUnit) == sizeof(Triangle4), "a single packet is laid out as a Triangle4");
   if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");
   if (s.quantizeBelow < 0 || s.quantizeMinTriangles < 0)
     throw SettingsError("HBVH quantization thresholds must be at least 0");
-  if (triangles.size() > kSlotMask) throw SettingsError("HBVH: at most 2^25 - 1 triangles");  // packets < 2^25
+  if (triangles.size() >= (1u << 25)) throw SettingsError("HBVH: at most 2^25 - 1 triangles");
   Timer timer;
   Builder builder(s, progress);
 
@@ -878,7 +898,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
-  m_leaves.clear();
+  m_blocks.clear();
   m_stats = HbvhStats();
   m_stats.triangles = builder.refs.size();
   if (builder.refs.empty()) {
@@ -898,17 +918,18 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   std::atomic<uint64_t> qnodes{0};
   m_stats.maxDepth = flat.measure(*root, false, qnodes);  // the root is a full Node
   if (root->wideNodes > kQuantBit) throw SettingsError("HBVH: too many nodes for 30-bit references");
+  if (root->wideUnits > kSlotMask) throw SettingsError("HBVH: leaf data over 4 GiB (leaf references hold 2^27 units)");
   m_nodes.resize(root->wideNodes);
   m_spheres.resize(root->wideSpheres);
-  m_leaves.resize(root->widePackets);
+  m_blocks.resize(root->wideUnits / Flattener::kLineUnits);
   flat.fill(*root, 0, 0, 0, false);
   m_stats.quantizedNodes = qnodes;
-  m_stats.nodes = (m_nodes.size() + qnodes) / 2;  // two slots a Node, one a QNode
+  m_stats.nodes = m_nodes.size() / 2 + qnodes;  // two slots a Node
   m_stats.leaves = leaves;
   m_stats.binaryNodes = binaryNodes;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_leaves.size() * sizeof(LeafUnit);
+  m_stats.bytes = m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_blocks.size() * sizeof(BlockLine);
   // Free the build trees before timing stops.
   builder.arena.clear();
   m_stats.buildSeconds = timer.seconds();

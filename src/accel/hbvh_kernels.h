@@ -12,15 +12,17 @@ namespace voxcone {
 /// The arrays a traversal reads; nodes[0] is the root (the tree is not empty).
 struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
+  const Vec4* spheres;
+  const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
   /// The node a node reference refers to: a Node (Hbvh::kQuantBit clear) or a QNode (set).
   const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
   const Hbvh::QNode& qnode(uint32_t ref) const {
-    return *reinterpret_cast<const Hbvh::QNode*>(nodes + (ref & ~Hbvh::kQuantBit));
+    return *reinterpret_cast<const Hbvh::QNode*>(blocks + size_t(ref & ~Hbvh::kQuantBit) * sizeof(Hbvh::BlockLine));
   }
-  const Vec4* spheres;
-  const float* leaves;  ///< Hbvh::LeafUnit's floats
   /// The first float of the leaf whose first unit is `unit`.
-  const float* leaf(uint32_t unit) const { return leaves + size_t(unit) * (sizeof(Hbvh::LeafUnit) / sizeof(float)); }
+  const float* leaf(uint32_t unit) const {
+    return reinterpret_cast<const float*>(blocks + size_t(unit) * Hbvh::kUnitBytes);
+  }
 };
 
 #ifdef VOXCONE_HBVH_COUNTERS

@@ -67,7 +67,7 @@ Ray fromOrigin(Ray ray) {
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
   if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
 #endif
@@ -77,7 +77,7 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
 bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
   if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const float*>(m_leaves.data())};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);
 #endif

@@ -266,8 +266,9 @@ inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountS
 /// four. Always inlined (prefetchChildren, below, says why).
 [[gnu::always_inline]] inline void prefetchRef(const HbvhArrays& bvh, uint32_t c) {
   const bool leaf = c & kLeafBit;
-  const char* p = leaf ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
-                       : reinterpret_cast<const char*>(bvh.nodes + (c & ~kQuantBit));
+  const char* p = leaf               ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
+                   : (c & kQuantBit) ? reinterpret_cast<const char*>(&bvh.qnode(c))
+                                     : reinterpret_cast<const char*>(&bvh.node(c));
   _mm_prefetch(p, _MM_HINT_T0);
   _mm_prefetch(p + 64, _MM_HINT_T0);
   if (leaf || !(c & kQuantBit)) {

@@ -89,7 +89,7 @@ public:
   struct alignas(64) Node {
     float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][kWidth];
-    uint32_t child[kWidth];  ///< node slot (| kQuantBit: a QNode's), or kLeafBit | (packets - 1) << kCountShift | first LeafUnit
+    uint32_t child[kWidth];  ///< Node slot, kQuantBit | QNode line, or kLeafBit | (packets - 1) << kCountShift | first unit
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
@@ -110,24 +110,36 @@ public:
     uint32_t used;           ///< mask of the slots that hold a child (the others are never entered)
     uint32_t pad[3];
   };
-  /// Nodes are stored in 128-byte slots: a Node takes two, a QNode one.
+  /// Nodes are stored in 128-byte slots, a Node in two (m_nodes).
   struct alignas(64) NodeSlot {
     unsigned char bytes[128];
   };
-  static_assert(sizeof(QNode) == sizeof(NodeSlot) && sizeof(Node) == 2 * sizeof(NodeSlot), "node sizes");
+  static_assert(sizeof(Node) == 2 * sizeof(NodeSlot), "node sizes");
+  /// The block store (m_blocks) holds QNodes and leaves in 32-byte units, each QNode on a line
+  /// of its own, followed by its leaves: a ray that enters a QNode finds the leaves it tests in
+  /// the same 4 KiB page as often as not (on a virtual machine whose host maps 4 KiB pages a
+  /// translation that misses the TLB costs about as much as a line from DRAM: bench
+  /// notes, README).
+  struct alignas(64) BlockLine {
+    unsigned char bytes[64];
+    BlockLine() {}  // sized first, filled in parallel: no zeroing
+  };
+  static constexpr uint32_t kUnitBytes = 32;
+  static_assert(sizeof(QNode) == 2 * sizeof(BlockLine), "a QNode is two lines");
   static constexpr uint32_t kLeafBit = 0x80000000u;
-  /// A node reference with this bit is a QNode's (its slot below); without, a Node's.
+  /// A node reference with this bit is a QNode's (its line in m_blocks below); without, a
+  /// Node's (its slot in m_nodes).
   static constexpr uint32_t kQuantBit = 0x40000000u;
-  static constexpr uint32_t kCountShift = 25;  ///< leaves hold up to 64 packets
-  static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;
-  /// Leaf storage, a packet's worth (160 bytes) per unit: a leaf's packets in pairs, each row of
-  /// a pair (a coordinate of eight triangles) eight consecutive floats, so that the AVX2 test
-  /// loads it in one instruction, then the ids; an odd last packet as a Triangle4 (four floats a
-  /// row). Floats only, ids by their bits.
+  static constexpr uint32_t kCountShift = 27;  ///< leaves hold up to 16 packets (64 triangles)
+  static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;  ///< a leaf's first unit
+  /// A leaf packet's storage (160 bytes, five units in m_blocks): a leaf's packets in pairs,
+  /// each row of a pair (a coordinate of eight triangles) eight consecutive floats, so that the
+  /// AVX2 test loads it in one instruction, then the ids; an odd last packet as a Triangle4
+  /// (four floats a row). Floats only, ids by their bits.
   struct alignas(32) LeafUnit {
     float f[40];
-    LeafUnit() {}  // sized first, filled in parallel: no zeroing
   };
+  static_assert(sizeof(LeafUnit) % kUnitBytes == 0, "packets are whole units");
   /// A packet's rows: [vertex][axis] at row 3 vertex + axis, then the ids (kIdRow); a pair's
   /// rows are kPairStride floats, a single packet's kSingleStride (LeafUnit: 10 rows of 4).
   static constexpr int kIdRow = 9, kLeafRows = 10, kPairStride = 8, kSingleStride = 4;
@@ -174,9 +186,10 @@ private:
   HbvhBuildSettings m_settings;
   HbvhStats m_stats;
   Simd m_simd = hostSimd();
-  std::vector<NodeSlot, HugePageAllocator<NodeSlot>> m_nodes;  ///< the root Node at slot 0
+  std::vector<NodeSlot, HugePageAllocator<NodeSlot>> m_nodes;  ///< the Nodes, depth first, the root at slot 0
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
-  std::vector<LeafUnit, HugePageAllocator<LeafUnit>> m_leaves;  ///< leaf triangles, in leaf order
+  /// QNodes and leaves (BlockLine), depth first: a node's leaves, then its inner children's parts.
+  std::vector<BlockLine, HugePageAllocator<BlockLine>> m_blocks;
 };
 
 }  // namespace voxcone
