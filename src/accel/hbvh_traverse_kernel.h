@@ -408,6 +408,24 @@ inline uint32_t* pushChildren(uint32_t* sp, const uint32_t* child, int mask) {
 #endif
 }
 
+/// The child in `mask` whose entry distance is the largest, the first of equals (distances
+/// ordered as integers, as slabTest does). Scalar, with conditional moves: an AVX2 horizontal
+/// maximum was 2-3% slower on the dragon's shadow rays.
+inline int farthestChild(const float* tNear, int mask) {
+  int best = __builtin_ctz(static_cast<unsigned>(mask));
+  int32_t bestT;
+  std::memcpy(&bestT, tNear + best, sizeof bestT);
+  for (int m = mask & (mask - 1); m; m &= m - 1) {
+    const int i = __builtin_ctz(static_cast<unsigned>(m));
+    int32_t ti;
+    std::memcpy(&ti, tNear + i, sizeof ti);
+    const bool better = ti > bestT;
+    best = better ? i : best;
+    bestT = better ? ti : bestT;
+  }
+  return best;
+}
+
 /// Stack depth: at most kWidth - 1 entries per level of the path; the 8-wide tree is no deeper
 /// than the binary one, whose depth stays below kMaxDepth + log2(triangles) = 60 + 25 (the
 /// build), rounded up to 96.
@@ -546,9 +564,17 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       const uint32_t* child;
       int mask = enterNode(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
       if (mask == 0) goto pop;
-      // Any hit ends the query, so order does not matter: take the first, push the rest.
-      cur = child[__builtin_ctz(static_cast<unsigned>(mask))];
-      sp = pushChildren(sp, child, mask & (mask - 1));
+      // Any hit ends the query: go on with the child most likely to hold one, push the rest.
+      // Below a full Node that is the farthest: a shadow ray leaves a surface, and the boxes
+      // around its origin are the ones sure to be entered and likely to hold nothing it hits
+      // (bench/hbvh_vs_embree, occlusion, ratio to Embree, 4 alternating runs, medians: 10M knot
+      // 1.02 -> 1.13, dragon 1.05 -> 1.05; nearest first: dragon 0.83, knot 0.90). Below a QNode,
+      // whose children are mostly its leaves, laid out after it, the first: farthest there too
+      // took the dragon to 1.02 (its leaves are tested in fewer numbers but out of order).
+      const int first = __builtin_ctz(static_cast<unsigned>(mask));
+      const int next = (cur & kQuantBit) || !(mask & (mask - 1)) ? first : farthestChild(tNear, mask);
+      cur = child[next];
+      sp = pushChildren(sp, child, mask & ~(1 << next));
     }
     {
       VOXCONE_COUNT(leaves, 1);
