@@ -1,11 +1,13 @@
 // HBVH traversal over 8-wide nodes, compiled once per instruction set (hbvh_kernels.h): the
 // eight child boxes of a node are tested at once, in one AVX register per plane where __AVX2__
-// is defined and in two SSE halves where not, with the same operations in the same order (no
-// FMA: the AVX2 TU is built with -mavx2 alone), so both kernels give the same hits bit for bit.
+// is defined and in two SSE halves where not, with the same operations in the same order (the
+// AVX2 TU is built with -ffp-contract=off, and its one FMA, in a QNode's planes, rounds as the
+// SSE multiply and add do), so both kernels give the same hits bit for bit.
 // The box test is the robust slab test (Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the
 // exit distance is widened by 1 + 2 gamma(3)); a child that keeps a bounding sphere must also be
 // entered by the ray's sphere interval. Closest-hit traversal visits the hit children nearest
-// first. Everything here lives in namespace voxcone::VOXCONE_ISA, so that the two compilations
+// first; shadow rays go on with the farthest below a full node (hbvhOccluded says why).
+// Everything here lives in namespace voxcone::VOXCONE_ISA, so that the two compilations
 // never share an inline function (the linker would keep one of them for both).
 
 #ifndef VOXCONE_ISA
