@@ -65,7 +65,9 @@ int main(int argc, char** argv) {
     const char* name;
     size_t region;
     int group;
-  } cases[] = {{"anywhere", 64, 1}, {"8 in a row within 2 MiB", size_t(2) << 20, 8}, {"8 in a row within 4 KiB", 4096, 8}};
+  } cases[] = {{"anywhere", 64, 1},
+               {"8 in a row within 2 MiB", size_t(2) << 20, 8},
+               {"8 in a row within 4 KiB", 4096, 8}};
   for (const auto& c : cases) {
     double t[3];
     for (double& x : t) x = chase(buf, bytes, c.region, c.group, hops);

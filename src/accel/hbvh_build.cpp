@@ -755,7 +755,8 @@ struct Hbvh::Flattener {
       if (b.leaf()) {
         uint32_t ids[64];  // maxLeafSize <= 64
         for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
-        packLeaf(ids, b.count, reinterpret_cast<float*>(reinterpret_cast<unsigned char*>(bvh.m_blocks.data()) + size_t(starts[i][2]) * kUnitBytes));
+        unsigned char* at = reinterpret_cast<unsigned char*>(bvh.m_blocks.data()) + size_t(starts[i][2]) * kUnitBytes;
+        packLeaf(ids, b.count, reinterpret_cast<float*>(at));
       } else {
         fill(b, starts[i][0], starts[i][1], starts[i][2], quantized(b));
       }
@@ -929,7 +930,8 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_stats.binaryNodes = binaryNodes;
   m_stats.sphereNodes = m_spheres.size();
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
-  m_stats.bytes = m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_blocks.size() * sizeof(BlockLine);
+  m_stats.bytes =
+      m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_blocks.size() * sizeof(BlockLine);
   // Free the build trees before timing stops.
   builder.arena.clear();
   m_stats.buildSeconds = timer.seconds();

@@ -89,7 +89,8 @@ public:
   struct alignas(64) Node {
     float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][kWidth];
-    uint32_t child[kWidth];  ///< Node slot, kQuantBit | QNode line, or kLeafBit | (packets - 1) << kCountShift | first unit
+    /// A Node's slot, kQuantBit | a QNode's line, or kLeafBit | (packets - 1) << kCountShift | first unit
+    uint32_t child[kWidth];
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
   };
