@@ -14,13 +14,16 @@ struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
+  // The accessors are always inlined: an out-of-line copy compiled in the AVX2 kernels' object
+  // (as an unoptimized or sanitizer build would emit) could be the one the linker keeps for the
+  // baseline kernels too (Hbvh.AvxKernelsShareNoInlineCodeWithTheBaseline).
   /// The node a node reference refers to: a Node (Hbvh::kQuantBit clear) or a QNode (set).
-  const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
-  const Hbvh::QNode& qnode(uint32_t ref) const {
+  [[gnu::always_inline]] const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
+  [[gnu::always_inline]] const Hbvh::QNode& qnode(uint32_t ref) const {
     return *reinterpret_cast<const Hbvh::QNode*>(blocks + size_t(ref & ~Hbvh::kQuantBit) * sizeof(Hbvh::BlockLine));
   }
   /// The first float of the leaf whose first unit is `unit`.
-  const float* leaf(uint32_t unit) const {
+  [[gnu::always_inline]] const float* leaf(uint32_t unit) const {
     return reinterpret_cast<const float*>(blocks + size_t(unit) * Hbvh::kUnitBytes);
   }
 };
