@@ -1,7 +1,8 @@
 #pragma once
 // The HBVH's traversal kernels, one set per instruction set (as Embree's isa namespaces): the
-// same source (hbvh_traverse_kernel.h) compiled for SSE 4.2 in hbvh_traverse.cpp and for AVX2
-// in hbvh_traverse_avx2.cpp; Hbvh::intersect / occluded call the one Hbvh::simd() names.
+// same source (hbvh_traverse_kernel.h) compiled for SSE 4.2 in hbvh_traverse.cpp, for AVX2 in
+// hbvh_traverse_avx2.cpp and for AVX-512 in hbvh_traverse_avx512.cpp; Hbvh::intersect / occluded
+// call the one Hbvh::simd() names.
 
 #include "voxcone/accel/hbvh.h"
 
@@ -14,7 +15,7 @@ struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
-  // The accessors are always inlined: an out-of-line copy compiled in the AVX2 kernels' object
+  // The accessors are always inlined: an out-of-line copy compiled in the AVX2 or AVX-512 kernels' object
   // (as an unoptimized or sanitizer build would emit) could be the one the linker keeps for the
   // baseline kernels too (Hbvh.AvxKernelsShareNoInlineCodeWithTheBaseline).
   /// The node a node reference refers to: a Node (Hbvh::kQuantBit clear) or a QNode (set).
@@ -49,6 +50,13 @@ namespace avx2 {
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
 }  // namespace avx2
+#endif
+
+#ifdef VOXCONE_AVX512_KERNELS
+namespace avx512 {
+std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+}  // namespace avx512
 #endif
 
 }  // namespace voxcone

@@ -1,6 +1,6 @@
 // HBVH traversal: the SSE 4.2 kernels (hbvh_traverse_kernel.h compiled for the baseline
-// instruction set), the choice between them and the AVX2 ones, and the scalar fallback of the
-// packet triangle test.
+// instruction set), the choice between them and the AVX2 and AVX-512 ones, and the scalar
+// fallback of the packet triangle test.
 
 #define VOXCONE_ISA sse42
 #include "hbvh_traverse_kernel.h"
@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <string>
 
 namespace voxcone {
 
@@ -25,30 +26,59 @@ bool intersectTriangleLane(const float* base, int stride, int lane, const Ray& r
 
 namespace {
 
-bool cpuRunsAvx2() {
+bool cpuRuns(Hbvh::Simd simd) {
+  switch (simd) {
+    case Hbvh::Simd::Sse42: return true;
+    case Hbvh::Simd::Avx2:
 #ifdef VOXCONE_AVX2_KERNELS
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 #else
-  return false;
+      return false;
 #endif
+    case Hbvh::Simd::Avx512:
+#ifdef VOXCONE_AVX512_KERNELS
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("avx512f") &&
+             __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw") &&
+             __builtin_cpu_supports("avx512dq");
+#else
+      return false;
+#endif
+  }
+  return false;
 }
 
 }  // namespace
 
+std::vector<Hbvh::Simd> Hbvh::runnableSimds() {
+  std::vector<Simd> v;
+  for (Simd s : {Simd::Sse42, Simd::Avx2, Simd::Avx512})
+    if (cpuRuns(s)) v.push_back(s);
+  return v;
+}
+
 Hbvh::Simd Hbvh::hostSimd() {
   static const Simd best = [] {
+    const Simd widest = runnableSimds().back();
     const char* forced = std::getenv("VOXCONE_SIMD");
     if (forced && std::strcmp(forced, "sse4.2") == 0) return Simd::Sse42;
-    return cpuRunsAvx2() ? Simd::Avx2 : Simd::Sse42;
+    if (forced && std::strcmp(forced, "avx2") == 0 && cpuRuns(Simd::Avx2)) return Simd::Avx2;
+    return widest;
   }();
   return best;
 }
 
-const char* Hbvh::simdName(Simd simd) { return simd == Simd::Avx2 ? "avx2" : "sse4.2"; }
+const char* Hbvh::simdName(Simd simd) {
+  switch (simd) {
+    case Simd::Avx2: return "avx2";
+    case Simd::Avx512: return "avx512";
+    case Simd::Sse42: break;
+  }
+  return "sse4.2";
+}
 
 void Hbvh::setSimd(Simd simd) {
-  if (simd == Simd::Avx2 && !cpuRunsAvx2())
-    throw SettingsError("HBVH: this CPU (or this build) has no AVX2 kernels");
+  if (!cpuRuns(simd))
+    throw SettingsError(std::string("HBVH: this CPU (or this build) has no ") + simdName(simd) + " kernels");
   m_simd = simd;
 }
 
@@ -68,6 +98,9 @@ std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
   if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
+#ifdef VOXCONE_AVX512_KERNELS
+  if (m_simd == Simd::Avx512) return avx512::hbvhIntersect(arrays, ray);
+#endif
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
 #endif
@@ -78,6 +111,9 @@ bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
   if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
+#ifdef VOXCONE_AVX512_KERNELS
+  if (m_simd == Simd::Avx512) return avx512::hbvhOccluded(arrays, ray, tMax);
+#endif
 #ifdef VOXCONE_AVX2_KERNELS
   if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);
 #endif

@@ -1,17 +1,19 @@
 // HBVH traversal over 8-wide nodes, compiled once per instruction set (hbvh_kernels.h): the
 // eight child boxes of a node are tested at once, in one AVX register per plane where __AVX2__
 // is defined and in two SSE halves where not, with the same operations in the same order (the
-// AVX2 TU is built with -ffp-contract=off, and its one FMA, in a QNode's planes, rounds as the
-// SSE multiply and add do), so both kernels give the same hits bit for bit.
+// AVX2 and AVX-512 TUs are built with -ffp-contract=off, and their one FMA, in a QNode's planes,
+// rounds as the SSE multiply and add do), so every kernel gives the same hits bit for bit. The
+// AVX-512 kernels are the AVX2 ones (256-bit registers) with AVX-512VL where it saves
+// instructions: box compares into mask registers, and vpcompressd to push the entered children.
 // The box test is the robust slab test (Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the
 // exit distance is widened by 1 + 2 gamma(3)); a child that keeps a bounding sphere must also be
 // entered by the ray's sphere interval. Closest-hit traversal visits the hit children nearest
 // first; shadow rays go on with the farthest below a full node (hbvhOccluded says why).
-// Everything here lives in namespace voxcone::VOXCONE_ISA, so that the two compilations
-// never share an inline function (the linker would keep one of them for both).
+// Everything here lives in namespace voxcone::VOXCONE_ISA, so that the compilations never
+// share an inline function (the linker would keep one of them for all).
 
 #ifndef VOXCONE_ISA
-#error "define VOXCONE_ISA (sse42 or avx2) before including hbvh_traverse_kernel.h"
+#error "define VOXCONE_ISA (sse42, avx2 or avx512) before including hbvh_traverse_kernel.h"
 #endif
 
 #include "hbvh_kernels.h"
@@ -60,7 +62,11 @@ inline VFloat imax(VFloat a, VFloat b) {
 }
 /// Lanes where a <= b, ordered as integers.
 inline int lessEqualMask(VFloat a, VFloat b) {
+#ifdef __AVX512VL__
+  return _mm256_cmple_epi32_mask(_mm256_castps_si256(a), _mm256_castps_si256(b));  // into a mask register
+#else
   return 0xff ^ _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b))));
+#endif
 }
 #else
 using VFloat = __m128;  ///< one plane of four children (a node takes two)
@@ -374,7 +380,7 @@ inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, cons
       [&](const float* block) { return intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2) != 0; });
 }
 
-#ifdef __AVX2__
+#if defined(__AVX2__) && !defined(__AVX512VL__)
 /// Nibble k of kCompress.lanes[m] is the index of the k-th set bit of m: the permutation that
 /// packs the lanes of mask m to the front, in order.
 struct CompressTable {
@@ -395,11 +401,17 @@ inline uint32_t* pushChildren(uint32_t* sp, const uint32_t* child, int mask) {
 #ifdef __AVX2__
   static_assert(offsetof(Node, child) % 32 == 0 && alignof(Node) % 32 == 0, "a node's refs are one aligned load");
   static_assert(offsetof(QNode, child) % 32 == 0 && alignof(QNode) % 32 == 0, "a node's refs are one aligned load");
+  const __m256i refs = _mm256_load_si256(reinterpret_cast<const __m256i*>(child));
+#ifdef __AVX512VL__
+  // vpcompressd into a register (to memory it is microcoded on AMD's Zen 4).
+  const __m256i packed = _mm256_maskz_compress_epi32(__mmask8(mask), refs);
+#else
   // vpermd reads the low three bits of each index: the nibbles need no masking.
   const __m256i idx = _mm256_srlv_epi32(_mm256_set1_epi32(int(kCompress.lanes[mask])),
                                         _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28));
-  const __m256i refs = _mm256_load_si256(reinterpret_cast<const __m256i*>(child));
-  _mm256_storeu_si256(reinterpret_cast<__m256i*>(sp), _mm256_permutevar8x32_epi32(refs, idx));
+  const __m256i packed = _mm256_permutevar8x32_epi32(refs, idx);
+#endif
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(sp), packed);
   return sp + __builtin_popcount(static_cast<unsigned>(mask));
 #else
   for (int i = 0; i < kWidth; ++i) {

@@ -160,8 +160,9 @@ std::vector<Variant> variants() {
   // but the root quantized; the hybrid with full nodes only, and with full nodes above quantized
   // ones (as large scenes are built by default); the kd-tree as built by default and pushed to
   // deep trees of many straddling references.
-  // The HBVH with the host's kernels (AVX2 where the CPU has it) and, where those are not SSE,
-  // once more with the SSE kernels forced.
+  // The HBVH with the host's kernels (the widest the CPU runs) and, where those are not SSE,
+  // once more with the SSE kernels forced; where the host runs AVX-512, the hybrid once with
+  // AVX2.
   const Hbvh::Simd host = Hbvh::hostSimd();
   std::vector<Variant> v = {{"bvh", hbvh(0.0f, 8)},
                             {"hbvh", hbvh(1.0f, 8)},
@@ -176,6 +177,7 @@ std::vector<Variant> variants() {
     v.push_back({"hbvh-all-spheres-sse4.2", hbvh(100.0f, 2, Hbvh::Simd::Sse42)});
     v.push_back({"hbvh-full-nodes-sse4.2", hbvh(1.0f, 8, Hbvh::Simd::Sse42, kNoneQuantized)});
   }
+  if (host == Hbvh::Simd::Avx512) v.push_back({"hbvh-avx2", hbvh(1.0f, 8, Hbvh::Simd::Avx2)});
   return v;
 }
 
@@ -380,7 +382,7 @@ TEST(Accel, EmptyAndDegenerateInput) {
 
 TEST(Hbvh, RaysFromBeforeTheirOriginAreTracedFromIt) {
   // The kernels order box distances as integers, which holds for tMin >= 0: a negative tMin
-  // is traced from the origin (as Embree's tnear), in both kernels, closest hit and occlusion.
+  // is traced from the origin (as Embree's tnear), in every kernel, closest hit and occlusion.
   // Squares at z = -1 (behind the origin) and z = 2, 3 (in front), the ray along +z.
   std::vector<Vec3> pos;
   std::vector<UVec3> tris;
@@ -390,8 +392,7 @@ TEST(Hbvh, RaysFromBeforeTheirOriginAreTracedFromIt) {
     tris.push_back({b, b + 1, b + 2});
     tris.push_back({b, b + 2, b + 3});
   }
-  std::vector<Hbvh::Simd> kernels = {Hbvh::Simd::Sse42};
-  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) kernels.push_back(Hbvh::hostSimd());
+  const std::vector<Hbvh::Simd> kernels = Hbvh::runnableSimds();
   for (Hbvh::Simd simd : kernels) {
     Hbvh bvh(pos, tris);
     bvh.setSimd(simd);
@@ -416,35 +417,40 @@ TEST(Hbvh, RaysFromBeforeTheirOriginAreTracedFromIt) {
 }
 
 TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
-  // The AVX2 and SSE kernels run the same operations in the same order, so renders do not
-  // depend on the machine's instruction set: every hit, distance and barycentric equal.
-  if (Hbvh::hostSimd() != Hbvh::Simd::Avx2) GTEST_SKIP() << "this CPU runs no AVX2 kernels";
-  for (const Soup& s : {sphereSoup(3), randomSoup(3000, 13), cornellSoup()}) {
-    Bounds3 b;
-    for (const Vec3& p : s.pos) b.extend(p);
-    for (const auto& [ratio, quantizeBelow] : {std::pair{1.0f, 0}, {100.0f, 0}, {1.0f, 1 << 30}, {100.0f, 1 << 30}}) {
-      HbvhBuildSettings settings;
-      settings.sphereAreaRatio = ratio;
-      settings.sphereTestCost = 0.0f;
-      settings.quantizeBelow = quantizeBelow;
-      settings.quantizeMinTriangles = 0;
-      Hbvh avx(s.pos, s.tris, settings), sse(s.pos, s.tris, settings);
-      avx.setSimd(Hbvh::Simd::Avx2);
-      sse.setSimd(Hbvh::Simd::Sse42);
-      Rng rng(17, 0);
-      int hits = 0, differ = 0;
-      for (int i = 0; i < 50000; ++i) {
-        const Ray r = makeRay(s, b, rng);
-        const auto a = avx.intersect(r), c = sse.intersect(r);
-        hits += a.has_value();
-        if (a.has_value() != c.has_value() ||
-            (a && (a->t != c->t || a->triangle != c->triangle || a->b1 != c->b1 || a->b2 != c->b2)))
-          ++differ;
-        const float tOcc = a ? a->t : r.tMax;
-        if (avx.occluded(r, tOcc) != sse.occluded(r, tOcc)) ++differ;
+  // The AVX2, AVX-512 and SSE kernels run the same operations in the same order, so renders do
+  // not depend on the machine's instruction set: every hit, distance and barycentric equal.
+  const std::vector<Hbvh::Simd> kernels = Hbvh::runnableSimds();
+  if (kernels.size() < 2) GTEST_SKIP() << "this CPU runs no AVX2 kernels";
+  for (const Hbvh::Simd wide : kernels) {
+    if (wide == Hbvh::Simd::Sse42) continue;
+    for (const Soup& s : {sphereSoup(3), randomSoup(3000, 13), cornellSoup()}) {
+      Bounds3 b;
+      for (const Vec3& p : s.pos) b.extend(p);
+      for (const auto& [ratio, quantizeBelow] : {std::pair{1.0f, 0}, {100.0f, 0}, {1.0f, 1 << 30}, {100.0f, 1 << 30}}) {
+        HbvhBuildSettings settings;
+        settings.sphereAreaRatio = ratio;
+        settings.sphereTestCost = 0.0f;
+        settings.quantizeBelow = quantizeBelow;
+        settings.quantizeMinTriangles = 0;
+        Hbvh avx(s.pos, s.tris, settings), sse(s.pos, s.tris, settings);
+        avx.setSimd(wide);
+        sse.setSimd(Hbvh::Simd::Sse42);
+        Rng rng(17, 0);
+        int hits = 0, differ = 0;
+        for (int i = 0; i < 50000; ++i) {
+          const Ray r = makeRay(s, b, rng);
+          const auto a = avx.intersect(r), c = sse.intersect(r);
+          hits += a.has_value();
+          if (a.has_value() != c.has_value() ||
+              (a && (a->t != c->t || a->triangle != c->triangle || a->b1 != c->b1 || a->b2 != c->b2)))
+            ++differ;
+          const float tOcc = a ? a->t : r.tMax;
+          if (avx.occluded(r, tOcc) != sse.occluded(r, tOcc)) ++differ;
+        }
+        EXPECT_EQ(differ, 0) << Hbvh::simdName(wide) << " " << s.name << " sphere ratio " << ratio
+                             << " quantized below " << quantizeBelow;
+        EXPECT_GT(hits, 5000) << s.name;
       }
-      EXPECT_EQ(differ, 0) << s.name << " sphere ratio " << ratio << " quantized below " << quantizeBelow;
-      EXPECT_GT(hits, 5000) << s.name;
     }
   }
 }
@@ -456,8 +462,7 @@ TEST(Hbvh, QuantizedNodesFindWhatFullNodesFind) {
   // brute force) and the same occlusion. The meshes as they are and moved far from the origin
   // and shrunk, where a plane's rounding (origin + q scale) is large against a quantization
   // step; both kernels, with and without spheres.
-  std::vector<Hbvh::Simd> kernels = {Hbvh::Simd::Sse42};
-  if (Hbvh::hostSimd() != Hbvh::Simd::Sse42) kernels.push_back(Hbvh::hostSimd());
+  const std::vector<Hbvh::Simd> kernels = Hbvh::runnableSimds();
   for (const Soup& mesh : {randomSoup(3000, 21), gridSoup(40), cornellSoup()}) {
     for (const float scale : {1.0f, 0.05f}) {
       Soup s = mesh;
@@ -551,31 +556,38 @@ TEST(Hbvh, PacketRayConstantsAreTheWatertightRays) {
 }
 
 TEST(Hbvh, AvxKernelsShareNoInlineCodeWithTheBaseline) {
-  // The AVX2 kernels' object file may define only functions of namespace voxcone::avx2: an
-  // inline function of another namespace compiled there with AVX2 could be the copy the linker
-  // keeps for every caller, and crash the binary on a CPU without AVX2.
-#ifndef VOXCONE_AVX2_OBJECT
-  GTEST_SKIP() << "built without AVX2 kernels";
-#else
-  const std::string cmd = std::string("nm -C --defined-only -g '") + VOXCONE_AVX2_OBJECT + "' 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  ASSERT_NE(p, nullptr);
-  std::string out;
-  char buf[4096];
-  while (fgets(buf, sizeof(buf), p)) out += buf;
-  const int rc = pclose(p);
-  if (rc != 0) GTEST_SKIP() << "nm failed: " << out;
-  int defined = 0;
-  std::istringstream lines(out);
-  for (std::string line; std::getline(lines, line);) {
-    // Type descriptions (UBSan's function-type checks emit them) are data, the same whatever
-    // the instruction set.
-    if (line.empty() || line.find(" typeinfo") != std::string::npos) continue;
-    ++defined;
-    EXPECT_NE(line.find(" voxcone::avx2::"), std::string::npos) << line;
-  }
-  EXPECT_GE(defined, 2);  // hbvhIntersect and hbvhOccluded
+  // The AVX2 and AVX-512 kernels' object files may define only functions of their own namespace
+  // (voxcone::avx2, voxcone::avx512): an inline function of another namespace compiled there
+  // with wider instructions could be the copy the linker keeps for every caller, and crash the
+  // binary on a CPU without them.
+  std::vector<std::pair<std::string, std::string>> objects;  // path, namespace
+#ifdef VOXCONE_AVX2_OBJECT
+  objects.emplace_back(VOXCONE_AVX2_OBJECT, " voxcone::avx2::");
 #endif
+#ifdef VOXCONE_AVX512_OBJECT
+  objects.emplace_back(VOXCONE_AVX512_OBJECT, " voxcone::avx512::");
+#endif
+  if (objects.empty()) GTEST_SKIP() << "built without AVX2 kernels";
+  for (const auto& [object, ns] : objects) {
+    const std::string cmd = "nm -C --defined-only -g '" + object + "' 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    ASSERT_NE(p, nullptr);
+    std::string out;
+    char buf[4096];
+    while (fgets(buf, sizeof(buf), p)) out += buf;
+    const int rc = pclose(p);
+    if (rc != 0) GTEST_SKIP() << "nm failed: " << out;
+    int defined = 0;
+    std::istringstream lines(out);
+    for (std::string line; std::getline(lines, line);) {
+      // Type descriptions (UBSan's function-type checks emit them) are data, the same whatever
+      // the instruction set.
+      if (line.empty() || line.find(" typeinfo") != std::string::npos) continue;
+      ++defined;
+      EXPECT_NE(line.find(ns), std::string::npos) << object << ": " << line;
+    }
+    EXPECT_GE(defined, 2) << object;  // hbvhIntersect and hbvhOccluded
+  }
 }
 
 TEST(KdTree, StatsAreConsistent) {

@@ -15,6 +15,8 @@
 #include "voxcone/accel/triangle.h"
 #include "voxcone/core/huge_pages.h"
 
+#include <vector>
+
 namespace voxcone {
 
 /// Build settings (cf. Embree's RTCBuildArguments).
@@ -170,14 +172,18 @@ public:
   const HbvhStats& stats() const { return m_stats; }
   const HbvhBuildSettings& settings() const { return m_settings; }
 
-  /// The traversal kernels: SSE 4.2 (any x86-64 this project targets) or AVX2 (8 boxes in one
-  /// register). Both run the same operations in the same order, so they find the same hits, bit
-  /// for bit; AVX2 is only faster.
-  enum class Simd { Sse42, Avx2 };
-  /// The best kernel this CPU runs; VOXCONE_SIMD=sse4.2 in the environment forces SSE.
+  /// The traversal kernels: SSE 4.2 (any x86-64 this project targets), AVX2 (8 boxes in one
+  /// register) or AVX-512 (AVX2's with mask registers and compress). All run the same
+  /// operations in the same order, so they find the same hits, bit for bit; the wider are only
+  /// faster.
+  enum class Simd { Sse42, Avx2, Avx512 };
+  /// The best kernel this CPU runs; VOXCONE_SIMD=sse4.2 (or avx2) in the environment forces a
+  /// narrower one.
   static Simd hostSimd();
+  /// Every kernel this CPU and this build run, narrowest first (tests run them all).
+  static std::vector<Simd> runnableSimds();
   static const char* simdName(Simd simd);
-  /// Choose the kernel (tests run both); SettingsError when the CPU lacks it.
+  /// Choose the kernel; SettingsError when the CPU (or the build) lacks it.
   void setSimd(Simd simd);
   Simd simd() const { return m_simd; }
 
