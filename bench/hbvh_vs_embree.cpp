@@ -54,6 +54,7 @@ struct Options {
   int resolution = 1024;    ///< primary rays: resolution x resolution pixels
   uint64_t seed = 20240611; ///< seed of every ray set
   bool allQualities = false;
+  bool embreeRobust = false;  ///< also Embree MEDIUM with RTC_SCENE_FLAG_ROBUST
   std::string jsonPath;
   std::string set;   ///< trace only this ray set (for a profiler)
   std::string only;  ///< time only this tracer (for a profiler); the others' columns stay empty
@@ -97,10 +98,10 @@ void embreeError(void* /*user*/, RTCError code, const char* str) {
 /// One Embree scene holding the mesh as a single triangle geometry.
 class EmbreeScene {
 public:
-  EmbreeScene(RTCDevice device, const TriangleMesh& mesh, RTCBuildQuality quality) {
+  EmbreeScene(RTCDevice device, const TriangleMesh& mesh, RTCBuildQuality quality, RTCSceneFlags flags) {
     m_scene = rtcNewScene(device);
     rtcSetSceneBuildQuality(m_scene, quality);
-    rtcSetSceneFlags(m_scene, RTC_SCENE_FLAG_NONE);
+    rtcSetSceneFlags(m_scene, flags);
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetGeometryBuildQuality(geom, quality);
     // Embree-owned buffers (padded for its SIMD loads), so that they count in its memory.
@@ -399,12 +400,16 @@ int run(const Options& opt) {
   struct EmbreeVariant {
     std::string name;
     RTCBuildQuality quality;
+    RTCSceneFlags flags = RTC_SCENE_FLAG_NONE;
   };
   std::vector<EmbreeVariant> variants = {{"Embree MEDIUM", RTC_BUILD_QUALITY_MEDIUM}};
   if (opt.allQualities) {
     variants.push_back({"Embree LOW", RTC_BUILD_QUALITY_LOW});
     variants.push_back({"Embree HIGH", RTC_BUILD_QUALITY_HIGH});
   }
+  // Embree's robust mode: a conservative box test and a watertight triangle test, as the HBVH's
+  // kernels (the reference, Embree MEDIUM, runs neither).
+  if (opt.embreeRobust) variants.push_back({"Embree robust", RTC_BUILD_QUALITY_MEDIUM, RTC_SCENE_FLAG_ROBUST});
 
   // Builds. Each builder builds once untimed, then they take turns (who goes first alternating)
   // and each reports the median of buildReps: memory a process touches for the first time is
@@ -427,7 +432,7 @@ int run(const Options& opt) {
     const int64_t base = embreeMem.current.load();
     embreeMem.resetPeak();
     Timer t;
-    scenes[k] = std::make_unique<EmbreeScene>(device, mesh, variants[k].quality);
+    scenes[k] = std::make_unique<EmbreeScene>(device, mesh, variants[k].quality, variants[k].flags);
     if (timed) builds[k + 1].seconds.push_back(t.seconds());
     builds[k + 1].bytes = uint64_t(embreeMem.current.load() - base);
     builds[k + 1].peakBytes = uint64_t(embreeMem.peak.load() - base);
@@ -615,6 +620,9 @@ int main(int argc, char** argv) {
   app.add_option("--intersection-cost", opt.hbvh.intersectionCost, "HbvhBuildSettings::intersectionCost")
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");
+  app.add_flag("--embree-robust", opt.embreeRobust,
+               "also build and trace Embree MEDIUM in robust mode (RTC_SCENE_FLAG_ROBUST: conservative boxes, "
+               "watertight triangles, as the HBVH)");
   app.add_option("--json", opt.jsonPath, "write the results as JSON to this path");
   app.add_option("--set", opt.set, "trace only this ray set (primary, incoherent, secondary, occlusion)");
   app.add_option("--only", opt.only,
