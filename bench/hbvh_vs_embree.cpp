@@ -50,6 +50,7 @@ struct Options {
   std::string meshPath = VOXCONE_SOURCE_DIR "/data/models/dragon_vrip.ply";
   int threads = 1;          ///< tracing and build threads (0 = all)
   int reps = 5;             ///< timed repetitions per set and accelerator
+  std::string light = "above";  ///< the shadow rays' light: "above" or "below" the mesh
   int buildReps = 3;        ///< builds per accelerator (median reported)
   int resolution = 1024;    ///< primary rays: resolution x resolution pixels
   uint64_t seed = 20240611; ///< seed of every ray set
@@ -326,12 +327,15 @@ RaySet secondaryRays(const std::vector<SurfacePoint>& pts, uint64_t seed) {
 }
 
 /// (d) Shadow rays: from the primary hits to random points on a small square light above the
-/// mesh (a quarter of the box's x/z extent, half the box height above its top), tMax to it.
-RaySet occlusionRays(const std::vector<SurfacePoint>& pts, const Bounds3& box, uint64_t seed) {
+/// mesh (a quarter of the box's x/z extent, half the box height above its top), tMax to it; with
+/// `below`, as far below its bottom. The two show how an any-hit traversal's child order
+/// depends on the rays' direction: Embree goes on with a node's last child (highest index),
+/// the HBVH with the farthest entered.
+RaySet occlusionRays(const std::vector<SurfacePoint>& pts, const Bounds3& box, uint64_t seed, bool below) {
   RaySet set{"occlusion", true, {}};
   Rng rng(seed, 4);
   const Vec3 c = box.center(), ext = box.diagonal();
-  const float lightY = box.hi.y + 0.5f * ext.y;
+  const float lightY = below ? box.lo.y - 0.5f * ext.y : box.hi.y + 0.5f * ext.y;
   set.rays.reserve(pts.size());
   for (const SurfacePoint& sp : pts) {
     const Vec2 u = rng.uniform2();
@@ -381,7 +385,8 @@ double hbvhRatio(const SetResult& r) {
 
 int run(const Options& opt) {
   const ThreadLimit limit(opt.threads);
-  std::printf("hbvh_bench: mesh %s, threads %d, reps %d\n", opt.meshPath.c_str(), limit.threads(), opt.reps);
+  std::printf("hbvh_bench: mesh %s, threads %d, reps %d, light %s\n", opt.meshPath.c_str(), limit.threads(), opt.reps,
+              opt.light.c_str());
 
   // Load the mesh in its file's coordinates.
   Timer loadTimer;
@@ -457,7 +462,7 @@ int run(const Options& opt) {
   sets.push_back(incoherentRays(box, count, opt.seed));
   const std::vector<SurfacePoint> pts = primaryHits(*bvh, mesh, sets[0]);
   sets.push_back(secondaryRays(pts, opt.seed));
-  sets.push_back(occlusionRays(pts, box, opt.seed));
+  sets.push_back(occlusionRays(pts, box, opt.seed, opt.light == "below"));
   std::printf("generated ray sets in %.2f s (primary hits: %zu of %zu)\n\n", genTimer.seconds(), pts.size(), count);
 
   // Trace: one untimed pass (warm-up and verification), then interleaved timed repetitions.
@@ -554,6 +559,7 @@ int run(const Options& opt) {
     j["triangles"] = mesh.triangles.size();
     j["threads"] = limit.threads();
     j["reps"] = opt.reps;
+    j["light"] = opt.light;
     j["seed"] = opt.seed;
     j["resolution"] = opt.resolution;
     j["hbvh_settings"] = {{"bin_count", opt.hbvh.binCount},
@@ -620,6 +626,8 @@ int main(int argc, char** argv) {
   app.add_option("--intersection-cost", opt.hbvh.intersectionCost, "HbvhBuildSettings::intersectionCost")
       ->check(CLI::PositiveNumber);
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");
+  app.add_option("--light", opt.light, "shadow rays towards a light above the mesh (the default) or below it")
+      ->check(CLI::IsMember({"above", "below"}));
   app.add_flag("--embree-robust", opt.embreeRobust,
                "also build and trace Embree MEDIUM in robust mode (RTC_SCENE_FLAG_ROBUST: conservative boxes, "
                "watertight triangles, as the HBVH)");
