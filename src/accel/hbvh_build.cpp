@@ -863,6 +863,56 @@ Bounds3 Hbvh::bounds() const {
   return b;
 }
 
+HbvhLayout Hbvh::layout() const {
+  HbvhLayout out;
+  if (m_nodes.empty()) return out;
+  const uint64_t lineCount = m_blocks.size(), unitCount = lineCount * (sizeof(BlockLine) / kUnitBytes);
+  constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes, kQNodeUnits = sizeof(QNode) / kUnitBytes;
+  std::vector<uint32_t> stack = {0};
+  while (!stack.empty()) {
+    const uint32_t ref = stack.back();
+    stack.pop_back();
+    const bool quant = ref & kQuantBit;
+    const uint32_t index = ref & ~kQuantBit;
+    if (quant ? index + 1 >= lineCount : index + 1 >= m_nodes.size()) {
+      ++out.outOfBounds;
+      continue;
+    }
+    const uint32_t* child;
+    uint32_t used = 0;
+    if (quant) {
+      const QNode& q = *reinterpret_cast<const QNode*>(m_blocks.data() + index);
+      child = q.child;
+      used = q.used;
+      ++out.qnodes;
+    } else {
+      const Node& n = *reinterpret_cast<const Node*>(m_nodes.data() + index);
+      child = n.child;
+      for (int i = 0; i < kWidth; ++i) used |= uint32_t(n.lo[0][i] <= n.hi[0][i]) << i;
+      ++out.nodes;
+    }
+    uint64_t expected = uint64_t(index) * (sizeof(BlockLine) / kUnitBytes) + kQNodeUnits;  // after a QNode
+    bool inOrder = true;
+    for (int i = 0; i < kWidth; ++i) {
+      if (!(used >> i & 1u)) continue;
+      const uint32_t c = child[i];
+      if (!(c & kLeafBit)) {
+        stack.push_back(c);
+        continue;
+      }
+      ++out.leaves;
+      const uint64_t first = c & kSlotMask, units = (((c & ~kLeafBit) >> kCountShift) + 1u) * kPacketUnits;
+      if (first + units > unitCount) ++out.outOfBounds;
+      if (!quant) continue;
+      ++out.leavesBelowQNodes;
+      inOrder = inOrder && first == expected;
+      out.leavesAfterTheirQNode += inOrder;
+      expected = first + units;
+    }
+  }
+  return out;
+}
+
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");

@@ -301,6 +301,30 @@ TEST(Accel, ClosedMeshIsWatertightThroughVerticesAndEdges) {
   }
 }
 
+TEST(Hbvh, EachQNodesLeavesFollowIt) {
+  // The block layout: a QNode's leaves lie right after it in m_blocks, in child order (a ray
+  // finds them in the QNode's page), checked by a walk over the built arrays; the walk also
+  // finds every node and leaf the stats count, and no reference past its array.
+  const Soup s = randomSoup(20000, 23);
+  for (const int quantizeBelow : {0, 64, 1 << 30}) {
+    HbvhBuildSettings settings;
+    settings.quantizeBelow = quantizeBelow;
+    settings.quantizeMinTriangles = 0;
+    const Hbvh bvh(s.pos, s.tris, settings);
+    const HbvhLayout l = bvh.layout();
+    EXPECT_EQ(l.nodes + l.qnodes, bvh.stats().nodes) << quantizeBelow;
+    EXPECT_EQ(l.qnodes, bvh.stats().quantizedNodes) << quantizeBelow;
+    EXPECT_EQ(l.leaves, bvh.stats().leaves) << quantizeBelow;
+    EXPECT_EQ(l.outOfBounds, 0u) << quantizeBelow;
+    EXPECT_EQ(l.leavesAfterTheirQNode, l.leavesBelowQNodes) << quantizeBelow;
+    if (quantizeBelow == 0) {
+      EXPECT_EQ(l.qnodes, 0u);
+    } else {
+      EXPECT_GT(l.leavesBelowQNodes, l.leaves / 2) << quantizeBelow;  // most leaves hang below QNodes
+    }
+  }
+}
+
 TEST(Hbvh, StatsAreConsistent) {
   const Soup s = randomSoup(5000, 11);
   const Hbvh bvh(s.pos, s.tris);

@@ -80,6 +80,15 @@ struct HbvhStats {
   nlohmann::json toJson() const;
 };
 
+/// How a built HBVH lies in memory (Hbvh::layout: a walk over the arrays, apart from the code
+/// that wrote them).
+struct HbvhLayout {
+  uint64_t nodes = 0, qnodes = 0, leaves = 0;
+  uint64_t leavesBelowQNodes = 0;      ///< leaf children of QNodes
+  uint64_t leavesAfterTheirQNode = 0;  ///< of those, the ones laid out after their QNode, in child order
+  uint64_t outOfBounds = 0;            ///< references past the end of their array
+};
+
 /// The hybrid BVH over a triangle soup. With sphereAreaRatio 0 it is a plain AABB BVH (kind
 /// "bvh"): the same SAH build, layout and traversal, no spheres.
 class Hbvh final : public Accel {
@@ -170,6 +179,8 @@ public:
   nlohmann::json statsJson() const override;
 
   const HbvhStats& stats() const { return m_stats; }
+  /// Walk the tree and check its block layout: each QNode's leaves follow it, in child order.
+  HbvhLayout layout() const;
   const HbvhBuildSettings& settings() const { return m_settings; }
 
   /// The traversal kernels: SSE 4.2 (any x86-64 this project targets), AVX2 (8 boxes in one
