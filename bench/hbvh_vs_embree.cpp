@@ -50,10 +50,10 @@ struct Options {
   std::string meshPath = VOXCONE_SOURCE_DIR "/data/models/dragon_vrip.ply";
   int threads = 1;          ///< tracing and build threads (0 = all)
   int reps = 5;             ///< timed repetitions per set and accelerator
-  std::string light = "above";  ///< the shadow rays' light: "above" or "below" the mesh
   int buildReps = 3;        ///< builds per accelerator (median reported)
   int resolution = 1024;    ///< primary rays: resolution x resolution pixels
   uint64_t seed = 20240611; ///< seed of every ray set
+  std::string light = "above";  ///< the shadow rays' light: above or below the mesh
   bool allQualities = false;
   bool embreeRobust = false;  ///< also Embree MEDIUM with RTC_SCENE_FLAG_ROBUST
   std::string jsonPath;
@@ -330,7 +330,7 @@ RaySet secondaryRays(const std::vector<SurfacePoint>& pts, uint64_t seed) {
 /// mesh (a quarter of the box's x/z extent, half the box height above its top), tMax to it; with
 /// `below`, as far below its bottom. The two show how an any-hit traversal's child order
 /// depends on the rays' direction: Embree goes on with a node's last child (highest index),
-/// the HBVH with the farthest entered.
+/// the HBVH with the farthest entered child below a full node.
 RaySet occlusionRays(const std::vector<SurfacePoint>& pts, const Bounds3& box, uint64_t seed, bool below) {
   RaySet set{"occlusion", true, {}};
   Rng rng(seed, 4);

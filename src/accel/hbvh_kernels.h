@@ -15,11 +15,13 @@ struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
-  // The accessors are always inlined: an out-of-line copy compiled in the AVX2 or AVX-512 kernels' object
-  // (as an unoptimized or sanitizer build would emit) could be the one the linker keeps for the
-  // baseline kernels too (Hbvh.AvxKernelsShareNoInlineCodeWithTheBaseline).
+  // The accessors are always inlined: an out-of-line copy compiled in the AVX2 or AVX-512
+  // kernels' object (as an unoptimized or sanitizer build would emit) could be the one the
+  // linker keeps for the baseline kernels too (Hbvh.AvxKernelsShareNoInlineCodeWithTheBaseline).
   /// The node a node reference refers to: a Node (Hbvh::kQuantBit clear) or a QNode (set).
-  [[gnu::always_inline]] const Hbvh::Node& node(uint32_t ref) const { return *reinterpret_cast<const Hbvh::Node*>(nodes + ref); }
+  [[gnu::always_inline]] const Hbvh::Node& node(uint32_t ref) const {
+    return *reinterpret_cast<const Hbvh::Node*>(nodes + ref);
+  }
   [[gnu::always_inline]] const Hbvh::QNode& qnode(uint32_t ref) const {
     return *reinterpret_cast<const Hbvh::QNode*>(blocks + size_t(ref & ~Hbvh::kQuantBit) * sizeof(Hbvh::BlockLine));
   }
