@@ -522,6 +522,12 @@ int run(const Options& opt) {
               (unsigned long long)hs.nodes, (unsigned long long)hs.quantizedNodes, (unsigned long long)hs.leaves,
               (unsigned long long)hs.sphereNodes,
               hs.avgLeafSize, hs.maxDepth, hs.sahCost);
+  const HbvhLayout layout = bvh->layout();
+  std::printf("HBVH layout: %llu of %llu leaves below QNodes follow them; distinct vertices a leaf triangle %.2f "
+              "(%llu leaves over 16)\n",
+              (unsigned long long)layout.leavesAfterTheirQNode, (unsigned long long)layout.leavesBelowQNodes,
+              double(layout.leafDistinctVertices) / double(std::max<uint64_t>(layout.leafTriangles, 1)),
+              (unsigned long long)layout.leavesOver16Vertices);
   std::printf("\n%-14s %10s %10s %12s\n", "build", "time ms", "MiB", "peak MiB");
   for (const BuildResult& b : builds) {
     char peak[32] = "-";

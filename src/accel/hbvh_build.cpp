@@ -868,6 +868,31 @@ HbvhLayout Hbvh::layout() const {
   if (m_nodes.empty()) return out;
   const uint64_t lineCount = m_blocks.size(), unitCount = lineCount * (sizeof(BlockLine) / kUnitBytes);
   constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes, kQNodeUnits = sizeof(QNode) / kUnitBytes;
+  // A leaf's triangles (lanes whose first x is not the padding's NaN) and distinct vertices.
+  std::vector<std::array<uint32_t, 3>> vertices;
+  const auto countVertices = [&](uint64_t firstUnit, uint32_t packets) {
+    const float* block = reinterpret_cast<const float*>(reinterpret_cast<const unsigned char*>(m_blocks.data()) +
+                                                        firstUnit * kUnitBytes);
+    vertices.clear();
+    for (uint32_t p = 0; p < packets;) {
+      const int stride = packets - p >= 2 ? kPairStride : kSingleStride;
+      for (int lane = 0; lane < stride; ++lane) {
+        if (std::isnan(block[lane])) continue;
+        ++out.leafTriangles;
+        for (int vtx = 0; vtx < 3; ++vtx) {
+          std::array<uint32_t, 3> bits;
+          for (int a = 0; a < 3; ++a) std::memcpy(&bits[a], block + (3 * vtx + a) * stride + lane, sizeof(float));
+          vertices.push_back(bits);
+        }
+      }
+      block += kLeafRows * stride;
+      p += stride / kSingleStride;
+    }
+    std::sort(vertices.begin(), vertices.end());
+    const uint64_t distinct = uint64_t(std::unique(vertices.begin(), vertices.end()) - vertices.begin());
+    out.leafDistinctVertices += distinct;
+    out.leavesOver16Vertices += distinct > 16;
+  };
   std::vector<uint32_t> stack = {0};
   while (!stack.empty()) {
     const uint32_t ref = stack.back();
@@ -903,6 +928,7 @@ HbvhLayout Hbvh::layout() const {
       ++out.leaves;
       const uint64_t first = c & kSlotMask, units = (((c & ~kLeafBit) >> kCountShift) + 1u) * kPacketUnits;
       if (first + units > unitCount) ++out.outOfBounds;
+      else countVertices(first, units / kPacketUnits);
       if (!quant) continue;
       ++out.leavesBelowQNodes;
       inOrder = inOrder && first == expected;

@@ -317,12 +317,23 @@ TEST(Hbvh, EachQNodesLeavesFollowIt) {
     EXPECT_EQ(l.leaves, bvh.stats().leaves) << quantizeBelow;
     EXPECT_EQ(l.outOfBounds, 0u) << quantizeBelow;
     EXPECT_EQ(l.leavesAfterTheirQNode, l.leavesBelowQNodes) << quantizeBelow;
+    // Every triangle lies in one leaf; those of the random soup share no vertex.
+    EXPECT_EQ(l.leafTriangles, bvh.stats().triangles) << quantizeBelow;
+    EXPECT_EQ(l.leafDistinctVertices, 3 * l.leafTriangles) << quantizeBelow;
     if (quantizeBelow == 0) {
       EXPECT_EQ(l.qnodes, 0u);
     } else {
       EXPECT_GT(l.leavesBelowQNodes, l.leaves / 2) << quantizeBelow;  // most leaves hang below QNodes
     }
   }
+  // A grid's triangles share their vertices: a leaf of up to eight holds far fewer than three
+  // distinct vertices a triangle, never more than 16.
+  const Soup g = gridSoup(40);
+  const HbvhLayout gl = Hbvh(g.pos, g.tris).layout();
+  EXPECT_EQ(gl.leafTriangles, g.tris.size());
+  EXPECT_LT(gl.leafDistinctVertices, 2 * gl.leafTriangles);
+  EXPECT_GT(gl.leafDistinctVertices, gl.leafTriangles / 2);
+  EXPECT_EQ(gl.leavesOver16Vertices, 0u);
 }
 
 TEST(Hbvh, StatsAreConsistent) {

@@ -87,6 +87,9 @@ struct HbvhLayout {
   uint64_t leavesBelowQNodes = 0;      ///< leaf children of QNodes
   uint64_t leavesAfterTheirQNode = 0;  ///< of those, the ones laid out after their QNode, in child order
   uint64_t outOfBounds = 0;            ///< references past the end of their array
+  /// Triangles in the leaves, and the distinct vertex positions of each leaf summed over them,
+  /// with the leaves that have more than 16 (what a leaf storing each vertex once would hold).
+  uint64_t leafTriangles = 0, leafDistinctVertices = 0, leavesOver16Vertices = 0;
 };
 
 /// The hybrid BVH over a triangle soup. With sphereAreaRatio 0 it is a plain AABB BVH (kind
@@ -179,7 +182,8 @@ public:
   nlohmann::json statsJson() const override;
 
   const HbvhStats& stats() const { return m_stats; }
-  /// Walk the tree and check its block layout: each QNode's leaves follow it, in child order.
+  /// Walk the tree and check its block layout (each QNode's leaves follow it, in child order);
+  /// count the leaves' distinct vertices.
   HbvhLayout layout() const;
   const HbvhBuildSettings& settings() const { return m_settings; }
 
