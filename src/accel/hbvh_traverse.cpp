@@ -94,30 +94,40 @@ Ray fromOrigin(Ray ray) {
 
 }  // namespace
 
+namespace {
+
+/// One instruction set's kernels (setSimd admits only those the CPU runs).
+struct Kernels {
+  std::optional<Hit> (*intersect)(const HbvhArrays&, const Ray&);
+  bool (*occluded)(const HbvhArrays&, const Ray&, float);
+};
+
+Kernels kernelsFor(Hbvh::Simd simd) {
+  switch (simd) {
+#ifdef VOXCONE_AVX512_KERNELS
+    case Hbvh::Simd::Avx512: return {avx512::hbvhIntersect, avx512::hbvhOccluded};
+#endif
+#ifdef VOXCONE_AVX2_KERNELS
+    case Hbvh::Simd::Avx2: return {avx2::hbvhIntersect, avx2::hbvhOccluded};
+#endif
+    default: return {sse42::hbvhIntersect, sse42::hbvhOccluded};
+  }
+}
+
+}  // namespace
+
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
   if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
-#ifdef VOXCONE_AVX512_KERNELS
-  if (m_simd == Simd::Avx512) return avx512::hbvhIntersect(arrays, ray);
-#endif
-#ifdef VOXCONE_AVX2_KERNELS
-  if (m_simd == Simd::Avx2) return avx2::hbvhIntersect(arrays, ray);
-#endif
-  return sse42::hbvhIntersect(arrays, ray);
+  return kernelsFor(m_simd).intersect(arrays, ray);
 }
 
 bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
   if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
   const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data())};
-#ifdef VOXCONE_AVX512_KERNELS
-  if (m_simd == Simd::Avx512) return avx512::hbvhOccluded(arrays, ray, tMax);
-#endif
-#ifdef VOXCONE_AVX2_KERNELS
-  if (m_simd == Simd::Avx2) return avx2::hbvhOccluded(arrays, ray, tMax);
-#endif
-  return sse42::hbvhOccluded(arrays, ray, tMax);
+  return kernelsFor(m_simd).occluded(arrays, ray, tMax);
 }
 
 }  // namespace voxcone
