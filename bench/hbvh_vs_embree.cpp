@@ -524,12 +524,10 @@ int run(const Options& opt) {
               hs.avgLeafSize, hs.maxDepth, hs.sahCost);
   const HbvhLayout layout = bvh->layout();
   std::printf("HBVH layout: %llu of %llu leaves below QNodes follow them; distinct vertices a leaf triangle %.2f "
-              "(%llu leaves over 16); indexed leaves %llu (12 slots %llu) of %llu, leaves %.1f MiB\n",
+              "(%llu leaves over 16)\n",
               (unsigned long long)layout.leavesAfterTheirQNode, (unsigned long long)layout.leavesBelowQNodes,
               double(layout.leafDistinctVertices) / double(std::max<uint64_t>(layout.leafTriangles, 1)),
-              (unsigned long long)layout.leavesOver16Vertices, (unsigned long long)layout.indexedLeaves,
-              (unsigned long long)layout.wideIndexedLeaves, (unsigned long long)layout.leaves,
-              double(layout.leafBytes) / kMiB);
+              (unsigned long long)layout.leavesOver16Vertices);
   std::printf("\n%-14s %10s %10s %12s\n", "build", "time ms", "MiB", "peak MiB");
   for (const BuildResult& b : builds) {
     char peak[32] = "-";
@@ -577,8 +575,7 @@ int run(const Options& opt) {
                           {"traversal_cost", opt.hbvh.traversalCost},
                           {"intersection_cost", opt.hbvh.intersectionCost},
                           {"leaf_test_width", opt.hbvh.leafTestWidth},
-                          {"quantize_below", opt.hbvh.quantizeBelow},
-                          {"indexed_leaves", opt.hbvh.indexedLeaves}};
+                          {"quantize_below", opt.hbvh.quantizeBelow}};
     j["hbvh_stats"] = hs.toJson();
     j["build_ratio"] = buildRatio(builds);
     for (const BuildResult& b : builds)
@@ -625,7 +622,7 @@ int main(int argc, char** argv) {
   app.add_option("--seed", opt.seed, "seed of the ray sets");
   app.add_option("--sphere-ratio", opt.hbvh.sphereAreaRatio, "HbvhBuildSettings::sphereAreaRatio (0 = plain AABB)");
   app.add_option("--sphere-cost", opt.hbvh.sphereTestCost, "HbvhBuildSettings::sphereTestCost (0 = by area alone)");
-  app.add_option("--leaf", opt.hbvh.maxLeafSize, "HbvhBuildSettings::maxLeafSize")->check(CLI::Range(1, 32));
+  app.add_option("--leaf", opt.hbvh.maxLeafSize, "HbvhBuildSettings::maxLeafSize")->check(CLI::Range(1, 64));
   app.add_option("--bins", opt.hbvh.binCount, "HbvhBuildSettings::binCount")->check(CLI::Range(2, 256));
   app.add_option("--traversal-cost", opt.hbvh.traversalCost, "HbvhBuildSettings::traversalCost")
       ->check(CLI::PositiveNumber);
@@ -634,8 +631,6 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   app.add_option("--intersection-cost", opt.hbvh.intersectionCost, "HbvhBuildSettings::intersectionCost")
       ->check(CLI::PositiveNumber);
-  bool packedLeaves = false;
-  app.add_flag("--packed-leaves", packedLeaves, "HbvhBuildSettings::indexedLeaves = false: every leaf in packets");
   app.add_flag("--all-qualities", opt.allQualities, "also build and trace Embree LOW and HIGH");
   app.add_option("--light", opt.light, "shadow rays towards a light above the mesh (the default) or below it")
       ->check(CLI::IsMember({"above", "below"}));
@@ -648,7 +643,6 @@ int main(int argc, char** argv) {
                  "time only this tracer (\"HBVH\", \"Embree MEDIUM\"), e.g. under perf record; the untimed "
                  "verification pass still runs every tracer");
   CLI11_PARSE(app, argc, argv);
-  opt.hbvh.indexedLeaves = !packedLeaves;
   try {
     return run(opt);
   } catch (const std::exception& e) {

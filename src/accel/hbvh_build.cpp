@@ -580,67 +580,11 @@ struct Hbvh::Flattener {
       put(out, kPairStride, first);
     if (packets & 1u) put(out, kSingleStride, first);
   }
-  /// An indexed leaf's contents (Hbvh::kIndexedBit): its distinct vertices, in the order its
-  /// triangles first use them, and each lane's slot for each vertex.
-  struct IndexedPlan {
-    int slots = 0;
-    uint32_t index[kIndexedSlots];  ///< the slots' vertex indices
-    uint8_t vertex[3][kIndexedLanes];
-    bool wide() const { return slots > kIndexedLoSlots; }
-  };
-  /// Whether leaf n is indexed (the settings allow it, it has at most eight triangles and at
-  /// most kIndexedSlots distinct vertex indices, and the indexed leaf is no larger); if so,
-  /// its plan. By index, not position: the
-  /// positions are read only to write the leaf (measure's pass over the leaves reads only the
-  /// triangles).
-  bool planIndexed(const BuildNode& n, IndexedPlan& plan) const {
-    if (!bvh.m_settings.indexedLeaves || n.count > uint32_t(kIndexedLanes)) return false;
-    plan.slots = 0;
-    for (uint32_t lane = 0; lane < n.count; ++lane) {
-      const UVec3& t = tris[refs[n.first + lane].id()];
-      for (int vtx = 0; vtx < 3; ++vtx) {
-        int s = 0;
-        while (s < plan.slots && plan.index[s] != t[vtx]) ++s;
-        if (s == plan.slots) {
-          if (s == kIndexedSlots) return false;
-          plan.index[plan.slots++] = t[vtx];
-        }
-        plan.vertex[vtx][lane] = uint8_t(s);
-      }
-    }
-    if (indexedUnits(plan.wide()) > packets(n) * kPacketUnits) return false;  // larger than its packets
-    for (uint32_t lane = n.count; lane < uint32_t(kIndexedLanes); ++lane)
-      for (int vtx = 0; vtx < 3; ++vtx) plan.vertex[vtx][lane] = plan.vertex[vtx][0];  // repeats lane 0
-    return true;
-  }
-  /// Write the indexed leaf of `plan` and triangles ids[0..count) from `out` (Hbvh::kIndexedBit's
-  /// layout), every byte of its units.
-  void packIndexed(const IndexedPlan& plan, const uint32_t* ids, uint32_t count, unsigned char* out) const {
-    const bool wide = plan.wide();
-    float lo[3][kIndexedLoSlots] = {}, hi[3][kIndexedSlots - kIndexedLoSlots] = {};
-    for (int s = 0; s < plan.slots; ++s)
-      for (int a = 0; a < 3; ++a)
-        (s < kIndexedLoSlots ? lo[a][s] : hi[a][s - kIndexedLoSlots]) = pos[plan.index[s]][a];
-    uint32_t id[kIndexedLanes];
-    for (uint32_t lane = 0; lane < uint32_t(kIndexedLanes); ++lane) id[lane] = ids[lane < count ? lane : 0];
-    std::memset(out, 0, indexedUnits(wide) * kUnitBytes);
-    std::memcpy(out, lo, sizeof lo);
-    if (wide) std::memcpy(out + sizeof lo, hi, sizeof hi);
-    std::memcpy(out + indexedVertexOffset(wide), plan.vertex, sizeof plan.vertex);
-    std::memcpy(out + indexedIdOffset(wide), id, sizeof id);
-    out[indexedCountOffset(wide)] = uint8_t(count);
-  }
-  static_assert(indexedHiBytes(true) == sizeof(float[3][kIndexedSlots - kIndexedLoSlots]), "hi rows");
-
   static constexpr uint32_t kQNodeUnits = sizeof(QNode) / kUnitBytes;
   static constexpr uint32_t kLineUnits = sizeof(BlockLine) / kUnitBytes;
   static constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes;
-  static uint32_t packets(const BuildNode& n) { return (n.count + 3u) / 4u; }
-  /// Block units of leaf n, indexed or in packets.
-  uint32_t leafUnits(const BuildNode& n) const {
-    IndexedPlan plan;
-    return planIndexed(n, plan) ? indexedUnits(plan.wide()) : packets(n) * kPacketUnits;
-  }
+  /// Block units of leaf n's packets.
+  static uint32_t leafUnits(const BuildNode& n) { return (n.count + 3u) / 4u * kPacketUnits; }
   static uint64_t roundToLine(uint64_t units) { return (units + kLineUnits - 1) / kLineUnits * kLineUnits; }
 
   /// Subtrees of more triangles than the build's parallel threshold are measured and filled
@@ -780,19 +724,11 @@ struct Hbvh::Flattener {
     uint32_t nextNode = node + (quant ? 0 : 2);
     unit += quant ? kQNodeUnits : 0;
     uint32_t starts[kWidth][3];  // node, sphere, unit
-    IndexedPlan plans[kWidth];
-    bool indexed[kWidth] = {};
     for (int i = 0; i < k; ++i)
       if (kids[i]->leaf()) {
-        indexed[i] = planIndexed(*kids[i], plans[i]);
-        if (indexed[i]) {
-          child[i] = kLeafBit | kIndexedBit | (plans[i].wide() ? kWideSlotsBit : 0u) | unit;
-          unit += indexedUnits(plans[i].wide());
-        } else {
-          child[i] = kLeafBit | (packets(*kids[i]) - 1u) << kCountShift | unit;
-          unit += packets(*kids[i]) * kPacketUnits;
-        }
-        starts[i][2] = child[i] & kSlotMask;
+        child[i] = kLeafBit | ((kids[i]->count + 3u) / 4u - 1u) << kCountShift | unit;
+        starts[i][2] = unit;
+        unit += leafUnits(*kids[i]);
       }
     unit = uint32_t(roundToLine(unit));
     for (int i = 0; i < k; ++i)
@@ -817,11 +753,10 @@ struct Hbvh::Flattener {
     auto kid = [&](int i) {
       const BuildNode& b = *kids[i];
       if (b.leaf()) {
-        uint32_t ids[32];  // maxLeafSize <= 32
+        uint32_t ids[64];  // maxLeafSize <= 64
         for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
         unsigned char* at = reinterpret_cast<unsigned char*>(bvh.m_blocks.data()) + size_t(starts[i][2]) * kUnitBytes;
-        if (indexed[i]) packIndexed(plans[i], ids, b.count, at);
-        else packLeaf(ids, b.count, reinterpret_cast<float*>(at));
+        packLeaf(ids, b.count, reinterpret_cast<float*>(at));
       } else {
         fill(b, starts[i][0], starts[i][1], starts[i][2], quantized(b));
       }
@@ -935,12 +870,6 @@ HbvhLayout Hbvh::layout() const {
   constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes, kQNodeUnits = sizeof(QNode) / kUnitBytes;
   // A leaf's triangles (lanes whose first x is not the padding's NaN) and distinct vertices.
   std::vector<std::array<uint32_t, 3>> vertices;
-  const auto countDistinct = [&] {
-    std::sort(vertices.begin(), vertices.end());
-    const uint64_t distinct = uint64_t(std::unique(vertices.begin(), vertices.end()) - vertices.begin());
-    out.leafDistinctVertices += distinct;
-    out.leavesOver16Vertices += distinct > 16;
-  };
   const auto countVertices = [&](uint64_t firstUnit, uint32_t packets) {
     const float* block = reinterpret_cast<const float*>(reinterpret_cast<const unsigned char*>(m_blocks.data()) +
                                                         firstUnit * kUnitBytes);
@@ -959,32 +888,10 @@ HbvhLayout Hbvh::layout() const {
       block += kLeafRows * stride;
       p += stride / kSingleStride;
     }
-    countDistinct();
-  };
-  // An indexed leaf's triangles (its count byte) and their vertices, read through their slots;
-  // a slot past the leaf's counts as out of bounds.
-  const auto countIndexed = [&](uint64_t firstUnit, bool wide) {
-    const unsigned char* leaf = reinterpret_cast<const unsigned char*>(m_blocks.data()) + firstUnit * kUnitBytes;
-    vertices.clear();
-    const uint32_t count = leaf[indexedCountOffset(wide)], slots = wide ? kIndexedSlots : kIndexedLoSlots;
-    if (count == 0 || count > uint32_t(kIndexedLanes)) ++out.outOfBounds;
-    for (uint32_t lane = 0; lane < count && lane < uint32_t(kIndexedLanes); ++lane) {
-      ++out.leafTriangles;
-      for (int vtx = 0; vtx < 3; ++vtx) {
-        const uint32_t slot = leaf[indexedVertexOffset(wide) + vtx * kIndexedLanes + lane];
-        if (slot >= slots) {
-          ++out.outOfBounds;
-          continue;
-        }
-        std::array<uint32_t, 3> bits;
-        for (int a = 0; a < 3; ++a) {
-          const float f = indexedCoordinate(leaf, slot, a);
-          std::memcpy(&bits[a], &f, sizeof f);
-        }
-        vertices.push_back(bits);
-      }
-    }
-    countDistinct();
+    std::sort(vertices.begin(), vertices.end());
+    const uint64_t distinct = uint64_t(std::unique(vertices.begin(), vertices.end()) - vertices.begin());
+    out.leafDistinctVertices += distinct;
+    out.leavesOver16Vertices += distinct > 16;
   };
   std::vector<uint32_t> stack = {0};
   while (!stack.empty()) {
@@ -1019,15 +926,9 @@ HbvhLayout Hbvh::layout() const {
         continue;
       }
       ++out.leaves;
-      const bool indexed = c & kIndexedBit, wide = c & kWideSlotsBit;
-      const uint64_t first = c & kSlotMask;
-      const uint64_t units = indexed ? indexedUnits(wide) : (((c & ~kLeafBit) >> kCountShift) + 1u) * kPacketUnits;
-      out.indexedLeaves += indexed;
-      out.wideIndexedLeaves += indexed && wide;
-      out.leafBytes += units * kUnitBytes;
+      const uint64_t first = c & kSlotMask, units = (((c & ~kLeafBit) >> kCountShift) + 1u) * kPacketUnits;
       if (first + units > unitCount) ++out.outOfBounds;
-      else if (indexed) countIndexed(first, wide);
-      else countVertices(first, uint32_t(units / kPacketUnits));
+      else countVertices(first, units / kPacketUnits);
       if (!quant) continue;
       ++out.leavesBelowQNodes;
       inOrder = inOrder && first == expected;
@@ -1041,10 +942,9 @@ HbvhLayout Hbvh::layout() const {
 void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& triangles, Progress* progress) {
   const HbvhBuildSettings& s = m_settings;
   if (s.binCount < 2 || s.binCount > 256) throw SettingsError("HBVH bin count must be in [2, 256]");
-  static_assert((kIndexedBit >> kCountShift) == 8, "packet counts 1..8 must fit between the indexed bit and the unit");
+  static_assert((kLeafBit >> kCountShift) == 16, "packet counts 1..16 must fit between the leaf bit and the unit");
   static_assert(sizeof(LeafUnit) == sizeof(Triangle4), "a single packet is laid out as a Triangle4");
-  static_assert(indexedUnits(false) == 5 && indexedUnits(true) == 7, "indexed leaves are 160 or 224 bytes");
-  if (s.maxLeafSize < 1 || s.maxLeafSize > 32) throw SettingsError("HBVH max leaf size must be in [1, 32]");
+  if (s.maxLeafSize < 1 || s.maxLeafSize > 64) throw SettingsError("HBVH max leaf size must be in [1, 64]");
   if (s.leafTestWidth < 1 || s.leafTestWidth > 64) throw SettingsError("HBVH leaf test width must be in [1, 64]");
   if (!(s.sphereTestCost >= 0.0f)) throw SettingsError("HBVH sphere test cost must be at least 0");
   if (s.quantizeBelow < 0 || s.quantizeMinTriangles < 0)

@@ -27,17 +27,9 @@ struct HbvhArrays {
   }
   /// The first float of the leaf whose first unit is `unit`.
   [[gnu::always_inline]] const float* leaf(uint32_t unit) const {
-    return reinterpret_cast<const float*>(leafBytes(unit));
-  }
-  [[gnu::always_inline]] const unsigned char* leafBytes(uint32_t unit) const {
-    return blocks + size_t(unit) * Hbvh::kUnitBytes;
+    return reinterpret_cast<const float*>(blocks + size_t(unit) * Hbvh::kUnitBytes);
   }
 };
-
-/// intersectTriangleWatertight on lane `lane` of the indexed leaf at `leaf` (Hbvh::kIndexedBit;
-/// `wide`: with kWideSlotsBit), out of line in hbvh_traverse.cpp, as intersectTriangleLane.
-bool intersectIndexedLane(const unsigned char* leaf, bool wide, int lane, const Ray& ray, float tMin, float tMax,
-                          float& tOut, float& b1Out, float& b2Out);
 
 #ifdef VOXCONE_HBVH_COUNTERS
 /// Traversal counts of this thread (a diagnostic build only: -DVOXCONE_HBVH_COUNTERS).

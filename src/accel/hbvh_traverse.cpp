@@ -24,17 +24,6 @@ bool intersectTriangleLane(const float* base, int stride, int lane, const Ray& r
   return intersectTriangleWatertight(ray.origin, wr, vertex(0), vertex(1), vertex(2), tMin, tMax, tOut, b1Out, b2Out);
 }
 
-bool intersectIndexedLane(const unsigned char* leaf, bool wide, int lane, const Ray& ray, float tMin, float tMax,
-                          float& tOut, float& b1Out, float& b2Out) {
-  const WatertightRay wr(ray.dir);
-  const auto vertex = [&](int vtx) {
-    const uint32_t slot = leaf[Hbvh::indexedVertexOffset(wide) + vtx * Hbvh::kIndexedLanes + lane];
-    return Vec3(Hbvh::indexedCoordinate(leaf, slot, 0), Hbvh::indexedCoordinate(leaf, slot, 1),
-                Hbvh::indexedCoordinate(leaf, slot, 2));
-  };
-  return intersectTriangleWatertight(ray.origin, wr, vertex(0), vertex(1), vertex(2), tMin, tMax, tOut, b1Out, b2Out);
-}
-
 namespace {
 
 bool cpuRuns(Hbvh::Simd simd) {

@@ -36,7 +36,7 @@ using Node = Hbvh::Node;
 using QNode = Hbvh::QNode;
 constexpr int kWidth = Hbvh::kWidth;
 constexpr uint32_t kLeafBit = Hbvh::kLeafBit, kCountShift = Hbvh::kCountShift, kSlotMask = Hbvh::kSlotMask;
-constexpr uint32_t kQuantBit = Hbvh::kQuantBit, kIndexedBit = Hbvh::kIndexedBit, kWideSlotsBit = Hbvh::kWideSlotsBit;
+constexpr uint32_t kQuantBit = Hbvh::kQuantBit;
 
 /// 1 + 2 gamma(3) (Ize 2013, sec. 3.3).
 constexpr float kSlabScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
@@ -266,14 +266,12 @@ struct LeafRay {
   }
 };
 
-/// A leaf reference's first unit and packet count (an indexed leaf's eight lanes count as two).
+/// A leaf reference's first LeafUnit and packet count.
 inline uint32_t leafFirst(uint32_t ref) { return ref & kSlotMask; }
-inline uint32_t leafPackets(uint32_t ref) {
-  return ref & kIndexedBit ? 2u : ((ref & ~kLeafBit) >> kCountShift) + 1u;
-}
+inline uint32_t leafPackets(uint32_t ref) { return ((ref & ~kLeafBit) >> kCountShift) + 1u; }
 
 /// Start loading what `c` refers to: a node's lines (four, a QNode's two), or a leaf's first
-/// four (all of an indexed leaf's). Always inlined (prefetchChildren, below, says why).
+/// four. Always inlined (prefetchChildren, below, says why).
 [[gnu::always_inline]] inline void prefetchRef(const HbvhArrays& bvh, uint32_t c) {
   const bool leaf = c & kLeafBit;
   const char* p = leaf               ? reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)))
@@ -289,8 +287,7 @@ inline uint32_t leafPackets(uint32_t ref) {
 
 /// Start loading the entered children while their order is worked out: on the dragon a third
 /// of the kernel's samples wait on those loads. A node's four lines; a leaf's first two packets
-/// (of at most two), which start 32 bytes into a line as often as not and then span six lines;
-/// an indexed leaf's (at most 224 bytes) lie in four.
+/// (of at most two), which start 32 bytes into a line as often as not and then span six lines.
 /// Every line the test reads pays: prefetching every other line only (for the L2's pair
 /// prefetcher to complete) made incoherent rays 0.92 -> 0.84x Embree's; the sixth line of a leaf
 /// 0.92 -> 0.93, and prefetching no more than a one-packet leaf's three lines no better than that.
@@ -301,7 +298,7 @@ inline uint32_t leafPackets(uint32_t ref) {
   for (; mask; mask &= mask - 1) {
     const uint32_t c = child[__builtin_ctz(static_cast<unsigned>(mask))];
     prefetchRef(bvh, c);
-    if ((c & (kLeafBit | kIndexedBit)) == kLeafBit) {
+    if (c & kLeafBit) {
       const char* p = reinterpret_cast<const char*>(bvh.leaf(leafFirst(c)));
       _mm_prefetch(p + 256, _MM_HINT_T0);
       _mm_prefetch(p + 2 * sizeof(Hbvh::LeafUnit) - 1, _MM_HINT_T0);
@@ -315,6 +312,13 @@ inline uint32_t leafPackets(uint32_t ref) {
 constexpr int kPairStride = Hbvh::kPairStride, kSingleStride = Hbvh::kSingleStride;
 constexpr int kPairFloats = Hbvh::kLeafRows * kPairStride;
 
+/// The id of lane `lane` of the packet (or pair) at `block`, `stride` floats a row.
+inline uint32_t laneId(const float* block, int stride, int lane) {
+  uint32_t id;
+  std::memcpy(&id, block + Hbvh::kIdRow * stride + lane, sizeof id);
+  return id;
+}
+
 /// Eight lanes of pair `block`: the mask of those hit, their t and barycentrics.
 inline int intersectPair(const float* block, const Ray& ray, const RayTriLanes& rl, float tMax, float* t, float* b1,
                          float* b2) {
@@ -323,79 +327,6 @@ inline int intersectPair(const float* block, const Ray& ray, const RayTriLanes& 
 #else
   return intersectPackets<F4>(block, kPairStride, ray, rl, tMax, t, b1, b2) |
          intersectPackets<F4>(block + 4, kPairStride, ray, rl, tMax, t + 4, b1 + 4, b2 + 4) << 4;
-#endif
-}
-
-#ifdef __AVX2__
-/// Lane i: slot idx[i] of the eight in lo (idx 0-7) or of the four in hi (8-11, in both of hi's
-/// halves); fromHi has the sign bit of lanes from hi (AVX2's blend).
-inline F8 pickSlots(F8 lo, F8 hi, __m256i idx, __m256 fromHi) {
-#ifdef __AVX512VL__
-  (void)fromHi;
-  return {_mm256_permutex2var_ps(lo.v, idx, hi.v)};  // bit 3 of an index picks hi
-#else
-  return {_mm256_blendv_ps(_mm256_permutevar8x32_ps(lo.v, idx), _mm256_permutevar8x32_ps(hi.v, idx), fromHi)};
-#endif
-}
-
-/// The eight lanes of the indexed leaf at `leaf` (Hbvh::kIndexedBit): each slot's coordinates
-/// offset and sheared once (the same operations a packet's lanes get, so the same floats), then
-/// picked for each triangle's vertices, and the packet test from there.
-inline int intersectIndexed(const unsigned char* leaf, bool wide, const Ray& ray, const RayTriLanes& rl, float tMax,
-                            float* t, float* b1, float* b2) {
-  const int64_t* loRow = rl.rowBytes[1];  // rows of eight floats
-  const int64_t* hiRow = rl.rowBytes[0];  // rows of four
-  F8 lo[3], hi[3];                        // sheared x, y, unsheared z of the slots
-  shearVertices<F8>([&](int a) { return F8::load(reinterpret_cast<const float*>(leaf + loRow[a])); }, rl, lo[0],
-                    lo[1], lo[2]);
-  // An eight-slot leaf picks nothing from hi: its first rows stand in (finite floats).
-  static_assert(Hbvh::indexedHiBytes(true) * 2 == Hbvh::indexedVertexOffset(false), "hi follows lo");
-  const unsigned char* hiRows = leaf + Hbvh::indexedVertexOffset(false) * wide;
-  shearVertices<F8>(
-      [&](int a) { return F8{_mm256_broadcast_ps(reinterpret_cast<const __m128*>(hiRows + hiRow[a]))}; }, rl, hi[0],
-      hi[1], hi[2]);
-  const unsigned char* vertex = leaf + Hbvh::indexedVertexOffset(wide);
-  F8 px[3], py[3], pz[3];
-  for (int vtx = 0; vtx < 3; ++vtx) {
-    const __m256i idx =
-        _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(vertex + vtx * Hbvh::kIndexedLanes)));
-    const __m256 fromHi = _mm256_castsi256_ps(_mm256_slli_epi32(idx, 28));
-    px[vtx] = pickSlots(lo[0], hi[0], idx, fromHi);
-    py[vtx] = pickSlots(lo[1], hi[1], idx, fromHi);
-    pz[vtx] = pickSlots(lo[2], hi[2], idx, fromHi);
-  }
-  return intersectSheared(px, py, pz, rl, tMax, t, b1, b2, [&](int i, float& ti, float& b1i, float& b2i) {
-    return intersectIndexedLane(leaf, wide, i, ray, ray.tMin, tMax, ti, b1i, b2i);
-  });
-}
-#else
-/// The indexed leaf at `leaf` as a pair of packets at `block` (the SSE kernels test it so).
-inline void unpackIndexed(const unsigned char* leaf, bool wide, float* block) {
-  const unsigned char* vertex = leaf + Hbvh::indexedVertexOffset(wide);
-  for (int lane = 0; lane < kPairStride; ++lane)
-    for (int vtx = 0; vtx < 3; ++vtx)
-      for (int a = 0; a < 3; ++a)
-        block[(3 * vtx + a) * kPairStride + lane] =
-            Hbvh::indexedCoordinate(leaf, vertex[vtx * Hbvh::kIndexedLanes + lane], a);
-  std::memcpy(block + Hbvh::kIdRow * kPairStride, leaf + Hbvh::indexedIdOffset(wide), kPairStride * sizeof(float));
-}
-#endif
-
-/// Eight lanes of the indexed leaf `ref`: the mask of those hit, their t and barycentrics, and
-/// where their ids lie (a row of eight). `scratch` (kPairFloats) holds the leaf unpacked where
-/// the kernel tests it as a pair of packets.
-inline int intersectIndexedRef(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const RayTriLanes& rl, float tMax,
-                               float* t, float* b1, float* b2, float* scratch, const unsigned char*& ids) {
-  const unsigned char* leaf = bvh.leafBytes(leafFirst(ref));
-  const bool wide = ref & kWideSlotsBit;
-#ifdef __AVX2__
-  (void)scratch;
-  ids = leaf + Hbvh::indexedIdOffset(wide);
-  return intersectIndexed(leaf, wide, ray, rl, tMax, t, b1, b2);
-#else
-  unpackIndexed(leaf, wide, scratch);
-  ids = reinterpret_cast<const unsigned char*>(scratch + Hbvh::kIdRow * kPairStride);
-  return intersectPair(scratch, ray, rl, tMax, t, b1, b2);
 #endif
 }
 
@@ -415,59 +346,37 @@ inline bool visitLeaf(const float* leaf, uint32_t packets, PairFn pair, SingleFn
   return (packets & 1u) && single(block);
 }
 
-/// The id row of the packet (or pair) at `block`, `stride` floats a row.
-inline const unsigned char* idRow(const float* block, int stride) {
-  return reinterpret_cast<const unsigned char*>(block + Hbvh::kIdRow * stride);
-}
-
-/// The leaf `ref` (indexed or in packets) against the closest-hit query so far (tMax, hit), a
-/// pair of packets at a time against the same tMax, lanes in order. True when one was closer.
-inline bool closerHitsLeaf(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const RayTriLanes& rl, float& tMax,
+/// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, hit),
+/// a pair at a time against the same tMax, lanes in order. True when one was closer.
+inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
                            Hit& hit) {
   bool found = false;
   alignas(32) float t[8], b1[8], b2[8];
-  const auto take = [&](int mask, const unsigned char* ids) {
+  const auto take = [&](int mask, const float* block, int stride) {
     for (; mask; mask &= mask - 1) {
       const int i = __builtin_ctz(static_cast<unsigned>(mask));
       if (t[i] < tMax) {
         tMax = t[i];
-        uint32_t id;
-        std::memcpy(&id, ids + i * sizeof id, sizeof id);
-        hit = {t[i], id, b1[i], b2[i]};
+        hit = {t[i], laneId(block, stride, i), b1[i], b2[i]};
         found = true;
       }
     }
     return false;  // every packet of the leaf
   };
-  if (__builtin_expect((ref & kIndexedBit) != 0, 1)) {
-    alignas(32) float scratch[kPairFloats];
-    const unsigned char* ids;
-    const int mask = intersectIndexedRef(bvh, ref, ray, rl, tMax, t, b1, b2, scratch, ids);
-    take(mask, ids);
-    return found;
-  }
   visitLeaf(
-      bvh.leaf(leafFirst(ref)), leafPackets(ref),
+      leaf, packets,
+      [&](const float* block) { return take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride); },
       [&](const float* block) {
-        return take(intersectPair(block, ray, rl, tMax, t, b1, b2), idRow(block, kPairStride));
-      },
-      [&](const float* block) {
-        return take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), idRow(block, kSingleStride));
+        return take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride);
       });
   return found;
 }
 
-/// Any hit in the leaf `ref` in (tMin, tMax).
-inline bool anyHitLeaf(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const RayTriLanes& rl, float tMax) {
+/// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
+inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float tMax) {
   alignas(32) float t[8], b1[8], b2[8];
-  if (__builtin_expect((ref & kIndexedBit) != 0, 1)) {
-    alignas(32) float scratch[kPairFloats];
-    const unsigned char* ids;
-    return intersectIndexedRef(bvh, ref, ray, rl, tMax, t, b1, b2, scratch, ids) != 0;
-  }
   return visitLeaf(
-      bvh.leaf(leafFirst(ref)), leafPackets(ref),
-      [&](const float* block) { return intersectPair(block, ray, rl, tMax, t, b1, b2) != 0; },
+      leaf, packets, [&](const float* block) { return intersectPair(block, ray, rl, tMax, t, b1, b2) != 0; },
       [&](const float* block) { return intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2) != 0; });
 }
 
@@ -639,7 +548,7 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       // Leaf: test its packets, shrinking tMax to the nearest hit.
       VOXCONE_COUNT(leaves, 1);
       VOXCONE_COUNT(packets, leafPackets(cur));
-      found |= closerHitsLeaf(bvh, cur, ray, leafRay.get(ray), tMax, hit);
+      found |= closerHitsLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax, hit);
     }
   pop:
     // The next child still in front of the closest hit.
@@ -684,7 +593,7 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
     {
       VOXCONE_COUNT(leaves, 1);
       VOXCONE_COUNT(packets, leafPackets(cur));
-      if (anyHitLeaf(bvh, cur, ray, leafRay.get(ray), tMax)) return true;
+      if (anyHitLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax)) return true;
     }
   pop:
     if (sp == stack) return false;

@@ -143,17 +143,28 @@ struct alignas(32) RayTriLanes {
   F get(Row row) const { return F::load(lanes[row]); }
 };
 
-/// The watertight test (triangle.h) on F::kLanes triangles at once, from their vertices relative
-/// to the ray's origin: px, py sheared, pz not (what intersectPackets and intersectIndexed
-/// make), with the same operations in the same order as the scalar test, so both give the same
-/// t. Lanes where an edge function is exactly zero are redone by `redo(lane, t, b1, b2)`, the
-/// scalar test, which resolves them in double precision. Returns the mask of lanes hit in
-/// (tMin, tMax) and their t and barycentrics.
-template <class F, class Redo>
-[[gnu::always_inline]] inline int intersectSheared(const F px[3], const F py[3], const F pz[3], const RayTriLanes& rl,
-                                                   float tMax, float* tOut, float* b1Out, float* b2Out, Redo redo) {
+/// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`,
+/// `stride` floats apart; F8 needs stride 8), with the same operations in the same order as the
+/// scalar test, so both give the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
+/// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
+/// and barycentrics.
+template <class F>
+inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
+                            float* tOut, float* b1Out, float* b2Out) {
   using R = RayTriLanes;
-  const F sz = rl.get<F>(R::kSz);
+  assert(stride == 4 || stride == 8);
+  const int64_t* rowBytes = rl.rowBytes[stride == 8];  // known where inlined
+  const F sx = rl.get<F>(R::kSx), sy = rl.get<F>(R::kSy), sz = rl.get<F>(R::kSz);
+  F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
+  for (int vtx = 0; vtx < 3; ++vtx) {
+    const char* rows = reinterpret_cast<const char*>(base + 3 * vtx * stride);
+    const auto row = [&](int a) { return F::load(reinterpret_cast<const float*>(rows + rowBytes[a])); };
+    const F x = row(0) - rl.get<F>(R::kOrgX);
+    const F y = row(1) - rl.get<F>(R::kOrgY);
+    pz[vtx] = row(2) - rl.get<F>(R::kOrgZ);
+    px[vtx] = x - sx * pz[vtx];
+    py[vtx] = y - sy * pz[vtx];
+  }
   // Scaled barycentrics: 2D edge functions (A = vertex 0, B = 1, C = 2).
   const F u = px[2] * py[1] - py[2] * px[1];
   const F v = px[0] * py[2] - py[0] * px[2];
@@ -198,40 +209,10 @@ template <class F, class Redo>
   }
   for (int lanes = zeroLanes; lanes; lanes &= lanes - 1) {
     const int i = __builtin_ctz(static_cast<unsigned>(lanes));
-    if (redo(i, tOut[i], b1Out[i], b2Out[i])) mask |= 1 << i;
+    if (intersectTriangleLane(base, stride, i, ray, ray.tMin, tMax, tOut[i], b1Out[i], b2Out[i]))
+      mask |= 1 << i;
   }
   return mask;
-}
-
-/// Vertex coordinates relative to the ray's origin, x and y sheared (RayTri4): `row(a)` loads
-/// the coordinate on axis a of kx, ky, kz (rl.rowBytes). Per lane, as the scalar test does.
-template <class F, class Row>
-[[gnu::always_inline]] inline void shearVertices(Row row, const RayTriLanes& rl, F& px, F& py, F& pz) {
-  using R = RayTriLanes;
-  const F x = row(0) - rl.get<F>(R::kOrgX);
-  const F y = row(1) - rl.get<F>(R::kOrgY);
-  pz = row(2) - rl.get<F>(R::kOrgZ);
-  px = x - rl.get<F>(R::kSx) * pz;
-  py = y - rl.get<F>(R::kSy) * pz;
-}
-
-/// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`,
-/// `stride` floats apart; F8 needs stride 8): intersectSheared, zero lanes redone by
-/// intersectTriangleLane.
-template <class F>
-inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
-                            float* tOut, float* b1Out, float* b2Out) {
-  assert(stride == 4 || stride == 8);
-  const int64_t* rowBytes = rl.rowBytes[stride == 8];  // known where inlined
-  F px[3], py[3], pz[3];  // per vertex: sheared x, y and the unsheared z coordinate
-  for (int vtx = 0; vtx < 3; ++vtx) {
-    const char* rows = reinterpret_cast<const char*>(base + 3 * vtx * stride);
-    const auto row = [&](int a) { return F::load(reinterpret_cast<const float*>(rows + rowBytes[a])); };
-    shearVertices(row, rl, px[vtx], py[vtx], pz[vtx]);
-  }
-  return intersectSheared(px, py, pz, rl, tMax, tOut, b1Out, b2Out, [&](int i, float& t, float& b1, float& b2) {
-    return intersectTriangleLane(base, stride, i, ray, ray.tMin, tMax, t, b1, b2);
-  });
 }
 
 /// One packet, four lanes (the kd-tree's test).

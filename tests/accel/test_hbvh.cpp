@@ -131,11 +131,9 @@ struct Variant {
 constexpr int kAllQuantized = 1 << 30, kNoneQuantized = 0;  ///< HbvhBuildSettings::quantizeBelow
 
 std::vector<Variant> variants() {
-  auto hbvh = [](float ratio, int leaf, Hbvh::Simd simd = Hbvh::hostSimd(), int quantizeBelow = kAllQuantized,
-                 bool indexedLeaves = true) {
+  auto hbvh = [](float ratio, int leaf, Hbvh::Simd simd = Hbvh::hostSimd(), int quantizeBelow = kAllQuantized) {
     return [=](const Soup& s) {
       HbvhBuildSettings settings;
-      settings.indexedLeaves = indexedLeaves;
       settings.sphereAreaRatio = ratio;
       settings.sphereTestCost = 0.0f;  // by area alone: spheres wherever the ratio allows
       settings.maxLeafSize = leaf;
@@ -161,7 +159,7 @@ std::vector<Variant> variants() {
   // A plain AABB BVH, the hybrid, spheres on every node with small leaves, each with every node
   // but the root quantized; the hybrid with full nodes only, and with full nodes above quantized
   // ones (as large scenes are built by default); the kd-tree as built by default and pushed to
-  // deep trees of many straddling references; the hybrid with every leaf in packets.
+  // deep trees of many straddling references.
   // The HBVH with the host's kernels (the widest the CPU runs) and, where those are not SSE,
   // once more with the SSE kernels forced; where the host runs AVX-512, the hybrid once with
   // AVX2.
@@ -172,7 +170,6 @@ std::vector<Variant> variants() {
                             {"hbvh-full-nodes", hbvh(1.0f, 8, host, kNoneQuantized)},
                             {"hbvh-all-spheres-full-nodes", hbvh(100.0f, 2, host, kNoneQuantized)},
                             {"hbvh-quantized-below-64", hbvh(1.0f, 8, host, 64)},
-                            {"hbvh-packed-leaves", hbvh(1.0f, 8, host, kAllQuantized, false)},
                             {"kdtree", kd(32, 8, 1.0f)},
                             {"kdtree-deep", kd(7, 1, 20.0f)}};
   if (host != Hbvh::Simd::Sse42) {
@@ -320,12 +317,9 @@ TEST(Hbvh, EachQNodesLeavesFollowIt) {
     EXPECT_EQ(l.leaves, bvh.stats().leaves) << quantizeBelow;
     EXPECT_EQ(l.outOfBounds, 0u) << quantizeBelow;
     EXPECT_EQ(l.leavesAfterTheirQNode, l.leavesBelowQNodes) << quantizeBelow;
-    // Every triangle lies in one leaf; those of the random soup share no vertex, so the leaves
-    // of up to four are indexed (at most 12 slots), the larger in packets.
+    // Every triangle lies in one leaf; those of the random soup share no vertex.
     EXPECT_EQ(l.leafTriangles, bvh.stats().triangles) << quantizeBelow;
     EXPECT_EQ(l.leafDistinctVertices, 3 * l.leafTriangles) << quantizeBelow;
-    EXPECT_GT(l.indexedLeaves, 0u) << quantizeBelow;
-    EXPECT_LT(l.indexedLeaves, l.leaves) << quantizeBelow;
     if (quantizeBelow == 0) {
       EXPECT_EQ(l.qnodes, 0u);
     } else {
@@ -340,82 +334,6 @@ TEST(Hbvh, EachQNodesLeavesFollowIt) {
   EXPECT_LT(gl.leafDistinctVertices, 2 * gl.leafTriangles);
   EXPECT_GT(gl.leafDistinctVertices, gl.leafTriangles / 2);
   EXPECT_EQ(gl.leavesOver16Vertices, 0u);
-  // So nearly all of its leaves are indexed, in 160 or 224 bytes against 160 a packet.
-  EXPECT_GT(gl.indexedLeaves, gl.leaves * 9 / 10);
-  EXPECT_GT(gl.wideIndexedLeaves, 0u);
-  HbvhBuildSettings packed;
-  packed.indexedLeaves = false;
-  const HbvhLayout pl = Hbvh(g.pos, g.tris, packed).layout();
-  EXPECT_EQ(pl.indexedLeaves, 0u);
-  EXPECT_EQ(pl.leafDistinctVertices, gl.leafDistinctVertices);
-  EXPECT_LT(double(gl.leafBytes), 0.8 * double(pl.leafBytes));
-}
-
-TEST(Hbvh, IndexedLeavesFindThePackedLeavesHitsBitForBit) {
-  // An indexed leaf holds the same floats as its packets, and the kernels offset and shear each
-  // slot as they do each lane: the same tree with indexed and with packed leaves gives the same
-  // hits, distances and barycentrics bit for bit (but for ties, below), and the same occlusion,
-  // with every kernel; also far from the origin, and with leaves of one or two triangles (lanes
-  // repeating lane 0).
-  for (const Soup& mesh : {sphereSoup(3), gridSoup(30), randomSoup(2000, 31), cornellSoup()}) {
-    for (const bool far : {false, true}) {
-      Soup s = mesh;
-      if (far) {
-        for (Vec3& p : s.pos) p = Vec3(-2000.0f, 500.0f, 9000.0f) + 0.1f * p;
-        s.name += "-far";
-      }
-      Bounds3 b;
-      for (const Vec3& p : s.pos) b.extend(p);
-      for (const int leaf : {8, 2}) {
-        HbvhBuildSettings settings;
-        settings.maxLeafSize = leaf;
-        settings.quantizeMinTriangles = 0;
-        Hbvh indexed(s.pos, s.tris, settings);
-        settings.indexedLeaves = false;
-        Hbvh packed(s.pos, s.tris, settings);
-        const HbvhLayout il = indexed.layout();
-        EXPECT_GT(il.indexedLeaves, 0u) << s.name;
-        EXPECT_EQ(il.outOfBounds, 0u) << s.name;
-        EXPECT_EQ(il.leafTriangles, indexed.stats().triangles) << s.name;
-        // Leaves of one packet are indexed only where eight slots hold them (160 bytes either
-        // way); the random soup's larger leaves share no vertex and stay packed.
-        if (leaf == 8 && mesh.name != "random") EXPECT_LT(indexed.stats().bytes, packed.stats().bytes) << s.name;
-        else EXPECT_EQ(indexed.stats().bytes, packed.stats().bytes) << s.name;
-        for (const Hbvh::Simd simd : Hbvh::runnableSimds()) {
-          indexed.setSimd(simd);
-          packed.setSimd(simd);
-          Rng rng(29, 0);
-          int hits = 0, differ = 0, ties = 0;
-          for (int i = 0; i < 40000; ++i) {
-            const Ray r = makeRay(s, b, rng);
-            const auto a = indexed.intersect(r), c = packed.intersect(r);
-            hits += a.has_value();
-            if (a.has_value() != c.has_value()) {
-              ++differ;
-            } else if (a && a->triangle != c->triangle) {
-              // Two leaves entered at the same distance are visited in the order of their
-              // references, which the formats number differently: a ray through a shared vertex
-              // or edge may end on the other triangle, at the same distance up to its rounding.
-              ties += sameHitDistance(a->t, c->t);
-              differ += !sameHitDistance(a->t, c->t);
-            } else if (a && (a->t != c->t || a->b1 != c->b1 || a->b2 != c->b2)) {
-              ++differ;
-            }
-            const float tOcc = a ? a->t * (0.5f + rng.uniform()) : r.tMax;
-            if (indexed.occluded(r, tOcc) != packed.occluded(r, tOcc)) ++differ;
-          }
-          EXPECT_LT(ties, 40000 / 50) << s.name << " leaf " << leaf << " " << Hbvh::simdName(simd);
-          EXPECT_EQ(differ, 0) << s.name << " leaf " << leaf << " " << Hbvh::simdName(simd);
-          EXPECT_GT(hits, 4000) << s.name;
-        }
-      }
-    }
-  }
-  // Leaves are at most 32 triangles (a packed leaf's reference holds up to 8 packets).
-  HbvhBuildSettings tooLarge;
-  tooLarge.maxLeafSize = 33;
-  const Soup g = gridSoup(4);
-  EXPECT_THROW(Hbvh(g.pos, g.tris, tooLarge), SettingsError);
 }
 
 TEST(Hbvh, StatsAreConsistent) {

@@ -15,7 +15,6 @@
 #include "voxcone/accel/triangle.h"
 #include "voxcone/core/huge_pages.h"
 
-#include <cstring>
 #include <vector>
 
 namespace voxcone {
@@ -23,7 +22,7 @@ namespace voxcone {
 /// Build settings (cf. Embree's RTCBuildArguments).
 struct HbvhBuildSettings {
   int binCount = 16;             ///< SAH bins per axis, [2, 256]
-  int maxLeafSize = 8;           ///< leaves never hold more triangles, [1, 32]
+  int maxLeafSize = 8;           ///< leaves never hold more triangles, [1, 64]
   /// SAH cost of visiting a node, relative to one leaf test (intersectionCost).
   float traversalCost = 1.0f;
   float intersectionCost = 1.0f; ///< SAH cost of one leaf test of leafTestWidth triangles
@@ -63,11 +62,6 @@ struct HbvhBuildSettings {
   /// 1.04, secondary 0.97 -> 1.05 at 64, two alternating runs); 2^15 triangles is where the tree
   /// (about 50 bytes a triangle, 1.6 MB) outgrows a core's 1 MB L2.
   int quantizeMinTriangles = 1 << 15;
-  /// Store each leaf of up to eight triangles with at most Hbvh::kIndexedSlots distinct vertex
-  /// positions as an indexed leaf (each position once, and per triangle three byte indices:
-  /// 160 or 224 bytes against two packets' 320); false keeps every leaf in packets. The same
-  /// tree and the same floats either way, so the same hits, bit for bit.
-  bool indexedLeaves = true;
 };
 
 /// Statistics of a built HBVH (cf. Embree's BVHNStatistics).
@@ -94,11 +88,8 @@ struct HbvhLayout {
   uint64_t leavesAfterTheirQNode = 0;  ///< of those, the ones laid out after their QNode, in child order
   uint64_t outOfBounds = 0;            ///< references past the end of their array
   /// Triangles in the leaves, and the distinct vertex positions of each leaf summed over them,
-  /// with the leaves that have more than 16.
+  /// with the leaves that have more than 16 (what a leaf storing each vertex once would hold).
   uint64_t leafTriangles = 0, leafDistinctVertices = 0, leavesOver16Vertices = 0;
-  /// Of the leaves, the indexed ones (Hbvh::kIndexedBit), and of those the ones with 12 slots.
-  uint64_t indexedLeaves = 0, wideIndexedLeaves = 0;
-  uint64_t leafBytes = 0;  ///< the leaves' units in bytes
 };
 
 /// The hybrid BVH over a triangle soup. With sphereAreaRatio 0 it is a plain AABB BVH (kind
@@ -112,8 +103,7 @@ public:
   struct alignas(64) Node {
     float lo[3][kWidth];     ///< [axis][child]; an empty slot has lo = +inf, hi = -inf
     float hi[3][kWidth];
-    /// A Node's slot, kQuantBit | a QNode's line, or a leaf: kLeafBit | (packets - 1) << kCountShift
-    /// | first unit, or an indexed leaf, kLeafBit | kIndexedBit [| kWideSlotsBit] | first unit
+    /// A Node's slot, kQuantBit | a QNode's line, or kLeafBit | (packets - 1) << kCountShift | first unit
     uint32_t child[kWidth];
     uint32_t sphereBase;     ///< index in m_spheres of this node's first child sphere
     uint32_t sphereMask;     ///< bit i: child i keeps a sphere (stored in child order)
@@ -156,12 +146,8 @@ public:
   /// A node reference with this bit is a QNode's (its line in m_blocks below); without, a
   /// Node's (its slot in m_nodes).
   static constexpr uint32_t kQuantBit = 0x40000000u;
-  static constexpr uint32_t kCountShift = 27;  ///< leaves hold up to 8 packets (32 triangles)
+  static constexpr uint32_t kCountShift = 27;  ///< leaves hold up to 16 packets (64 triangles)
   static constexpr uint32_t kSlotMask = (1u << kCountShift) - 1u;  ///< a leaf's first unit
-  /// In a leaf reference (kLeafBit set; in a node's, the same bit is kQuantBit): an indexed leaf.
-  static constexpr uint32_t kIndexedBit = 0x40000000u;
-  /// In an indexed leaf's reference: it has kIndexedSlots slots, without kIndexedLoSlots.
-  static constexpr uint32_t kWideSlotsBit = 1u << kCountShift;
   /// A leaf packet's storage (160 bytes, five units in m_blocks): a leaf's packets in pairs,
   /// each row of a pair (a coordinate of eight triangles) eight consecutive floats, so that the
   /// AVX2 test loads it in one instruction, then the ids; an odd last packet as a Triangle4
@@ -174,33 +160,6 @@ public:
   /// rows are kPairStride floats, a single packet's kSingleStride (LeafUnit: 10 rows of 4).
   static constexpr int kIdRow = 9, kLeafRows = 10, kPairStride = 8, kSingleStride = 4;
   static_assert(sizeof(LeafUnit) == kLeafRows * kSingleStride * sizeof(float), "a leaf unit is one packet");
-  /// An indexed leaf: up to eight triangles (lanes) over up to 12 distinct vertex positions
-  /// (slots), each stored once; a triangle of two packets' leaf has 1.2-1.3 distinct vertices in
-  /// the meshes measured (Hbvh::layout), against the three a packet stores. Bytes from its first
-  /// unit: slots 0-7 as rows [axis][slot] of eight floats (kIndexedLoSlots; the traversal loads
-  /// a row in one instruction, as a pair's), with kWideSlotsBit slots 8-11 as rows [axis][slot]
-  /// of four floats, then for each vertex of a triangle a row of eight slot indices (bytes,
-  /// [vertex][lane]), the eight ids and the triangle count (a byte). Lanes past the count repeat
-  /// lane 0 (a repeated hit changes no result); unused slots hold 0. 160 or 224 bytes, against
-  /// 320 for two packets.
-  static constexpr int kIndexedLoSlots = 8, kIndexedSlots = 12, kIndexedLanes = 8;
-  static constexpr uint32_t indexedHiBytes(bool wide) { return wide ? 3 * 4 * sizeof(float) : 0; }
-  static constexpr uint32_t indexedVertexOffset(bool wide) {
-    return 3 * kIndexedLoSlots * sizeof(float) + indexedHiBytes(wide);
-  }
-  static constexpr uint32_t indexedIdOffset(bool wide) { return indexedVertexOffset(wide) + 3 * kIndexedLanes; }
-  static constexpr uint32_t indexedCountOffset(bool wide) { return indexedIdOffset(wide) + 4 * kIndexedLanes; }
-  static constexpr uint32_t indexedUnits(bool wide) { return (indexedCountOffset(wide) + kUnitBytes) / kUnitBytes; }
-  /// Coordinate a of slot `slot` of the indexed leaf at `leaf`.
-  [[gnu::always_inline]] static float indexedCoordinate(const unsigned char* leaf, uint32_t slot, int a) {
-    constexpr uint32_t kHiSlots = kIndexedSlots - kIndexedLoSlots;
-    const size_t at = slot < uint32_t(kIndexedLoSlots)
-                          ? (a * kIndexedLoSlots + slot) * sizeof(float)
-                          : indexedVertexOffset(false) + (a * kHiSlots + slot - kIndexedLoSlots) * sizeof(float);
-    float f;
-    std::memcpy(&f, leaf + at, sizeof f);
-    return f;
-  }
 
 
   Hbvh() = default;
