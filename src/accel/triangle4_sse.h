@@ -94,12 +94,30 @@ constexpr uint32_t packedNextAxes() {
   return packed;
 }
 
+/// Byte offsets of rows kx, ky, kz in a packet of 4 ([0]) or 8 ([1]) floats a row, for each
+/// choice of kz and the sign of dir[kz] (index 2 kz + negative, as packedNextAxes).
+struct PacketRowBytes {
+  int64_t bytes[6][2][3];
+  constexpr PacketRowBytes() : bytes() {
+    for (int i = 0; i < 6; ++i) {
+      const uint32_t next = packedNextAxes() >> (4 * i);
+      const int k[3] = {int(next & 3u), int((next >> 2) & 3u), i / 2};
+      for (int a = 0; a < 3; ++a) {
+        bytes[i][0][a] = int64_t(k[a]) * 4 * int64_t(sizeof(float));
+        bytes[i][1][a] = int64_t(k[a]) * 8 * int64_t(sizeof(float));
+      }
+    }
+  }
+};
+inline constexpr PacketRowBytes kPacketRowBytes;
+
 /// Per-ray constants of the packet test: WatertightRay's permutation and shear (the same values;
 /// made here rather than by WatertightRay's inline constructor, which a kernel TU would compile
 /// for its own instruction set and the linker might keep for all). Without a branch: the axis
 /// choice follows the ray's direction, which a branch predictor cannot guess for incoherent rays.
 struct RayTri4 {
   int kx, ky, kz;
+  int axes;  ///< 2 kz + (dir[kz] < 0): the index of kPacketRowBytes
   float sx, sy, sz;
   float org[3];
   explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
@@ -110,7 +128,8 @@ struct RayTri4 {
     kz = 2 - 2 * (xy & xz) - ((xy ^ 1) & yz);
     // kx, ky follow kz cyclically, swapped where dir[kz] < 0 (winding).
     const int neg = d[kz] < 0.0f;
-    const uint32_t next = packedNextAxes() >> (4 * (2 * kz + neg));
+    axes = 2 * kz + neg;
+    const uint32_t next = packedNextAxes() >> (4 * axes);
     kx = int(next & 3u);
     ky = int((next >> 2) & 3u);
     sz = 1.0f / d[kz];
@@ -126,18 +145,16 @@ struct RayTri4 {
 struct alignas(32) RayTriLanes {
   enum Row { kOrgX, kOrgY, kOrgZ, kSx, kSy, kSz, kTMin, kRows };
   float lanes[kRows][8];  ///< origin[kx], origin[ky], origin[kz], sx, sy, sz, tMin
-  /// Byte offsets of rows kx, ky, kz in a packet of 4 ([0]) or 8 ([1]) floats a row.
-  int64_t rowBytes[2][3];
+  /// Byte offsets of rows kx, ky, kz in a packet of 4 ([0]) or 8 ([1]) floats a row (a row of
+  /// kPacketRowBytes: a table rather than six products a ray).
+  const int64_t (*rowBytes)[3];
   explicit RayTriLanes(const Ray& r) {
     const RayTri4 rt(r);
     const int k[3] = {rt.kx, rt.ky, rt.kz};
     const float v[kRows] = {rt.org[k[0]], rt.org[k[1]], rt.org[k[2]], rt.sx, rt.sy, rt.sz, r.tMin};
     for (int i = 0; i < kRows; ++i)
       for (int l = 0; l < 8; ++l) lanes[i][l] = v[i];
-    for (int a = 0; a < 3; ++a) {
-      rowBytes[0][a] = int64_t(k[a]) * 4 * int64_t(sizeof(float));
-      rowBytes[1][a] = int64_t(k[a]) * 8 * int64_t(sizeof(float));
-    }
+    rowBytes = kPacketRowBytes.bytes[rt.axes];
   }
   template <class F>
   F get(Row row) const { return F::load(lanes[row]); }
