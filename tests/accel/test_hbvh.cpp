@@ -566,8 +566,8 @@ TEST(Hbvh, SpheresAreKeptWhereTheSahSaysTheyPay) {
 
 TEST(Hbvh, PacketRayConstantsAreTheWatertightRays) {
   // The packet test makes the watertight test's permutation and shear itself (RayTri4); every
-  // lane equals the scalar test only if they are WatertightRay's, bit for bit: ties between
-  // axes, signed zeros, each octant, random directions.
+  // lane equals the scalar test only if they are WatertightRay's, bit for bit, and it reads the
+  // rows of those axes: ties between axes, signed zeros, each octant, random directions.
   std::vector<Vec3> dirs;
   const float values[] = {0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -0.5f, 1e-30f, -3.0f};
   for (float x : values)
@@ -587,6 +587,13 @@ TEST(Hbvh, PacketRayConstantsAreTheWatertightRays) {
     ASSERT_EQ(std::memcmp(&rt.sx, &wr.sx, sizeof(float)), 0);
     ASSERT_EQ(std::memcmp(&rt.sy, &wr.sy, sizeof(float)), 0);
     ASSERT_EQ(std::memcmp(&rt.sz, &wr.sz, sizeof(float)), 0);
+    // The rows the packet test reads (kPacketRowBytes): axis k's row is k rows of 4 or 8 floats in.
+    const sse42::RayTriLanes rl(r);
+    const int k[3] = {wr.kx, wr.ky, wr.kz};
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_EQ(rl.rowBytes[0][a], k[a] * 4 * int64_t(sizeof(float)));
+      ASSERT_EQ(rl.rowBytes[1][a], k[a] * 8 * int64_t(sizeof(float)));
+    }
   }
 }
 
