@@ -866,8 +866,8 @@ Bounds3 Hbvh::bounds() const {
 HbvhLayout Hbvh::layout() const {
   HbvhLayout out;
   if (m_nodes.empty()) return out;
-  const uint64_t lineCount = m_blocks.size(), unitCount = lineCount * (sizeof(BlockLine) / kUnitBytes);
-  constexpr uint32_t kPacketUnits = sizeof(LeafUnit) / kUnitBytes, kQNodeUnits = sizeof(QNode) / kUnitBytes;
+  using F = Flattener;  // the unit sizes fill laid the blocks out with
+  const uint64_t lineCount = m_blocks.size(), unitCount = lineCount * F::kLineUnits;
   // A leaf's triangles (lanes whose first x is not the padding's NaN) and distinct vertices.
   std::vector<std::array<uint32_t, 3>> vertices;
   const auto countVertices = [&](uint64_t firstUnit, uint32_t packets) {
@@ -916,7 +916,7 @@ HbvhLayout Hbvh::layout() const {
       for (int i = 0; i < kWidth; ++i) used |= uint32_t(n.lo[0][i] <= n.hi[0][i]) << i;
       ++out.nodes;
     }
-    uint64_t expected = uint64_t(index) * (sizeof(BlockLine) / kUnitBytes) + kQNodeUnits;  // after a QNode
+    uint64_t expected = uint64_t(index) * F::kLineUnits + F::kQNodeUnits;  // after a QNode
     bool inOrder = true;
     for (int i = 0; i < kWidth; ++i) {
       if (!(used >> i & 1u)) continue;
@@ -926,9 +926,10 @@ HbvhLayout Hbvh::layout() const {
         continue;
       }
       ++out.leaves;
-      const uint64_t first = c & kSlotMask, units = (((c & ~kLeafBit) >> kCountShift) + 1u) * kPacketUnits;
+      const uint32_t packets = ((c & ~kLeafBit) >> kCountShift) + 1u;
+      const uint64_t first = c & kSlotMask, units = uint64_t(packets) * F::kPacketUnits;
       if (first + units > unitCount) ++out.outOfBounds;
-      else countVertices(first, units / kPacketUnits);
+      else countVertices(first, packets);
       if (!quant) continue;
       ++out.leavesBelowQNodes;
       inOrder = inOrder && first == expected;

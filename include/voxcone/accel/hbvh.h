@@ -88,7 +88,8 @@ struct HbvhLayout {
   uint64_t leavesAfterTheirQNode = 0;  ///< of those, the ones laid out after their QNode, in child order
   uint64_t outOfBounds = 0;            ///< references past the end of their array
   /// Triangles in the leaves, and the distinct vertex positions of each leaf summed over them,
-  /// with the leaves that have more than 16 (what a leaf storing each vertex once would hold).
+  /// with the leaves that have more than 16 (what a leaf storing each vertex once would hold; such
+  /// a format, ef5d4fb, saved 30% of the memory and no time: README, Benchmarks).
   uint64_t leafTriangles = 0, leafDistinctVertices = 0, leavesOver16Vertices = 0;
 };
 
