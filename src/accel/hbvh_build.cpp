@@ -532,6 +532,10 @@ struct Hbvh::Flattener {
   const std::vector<PrimRef, HugePageAllocator<PrimRef>>& refs;
   const std::vector<Vec3>& pos;
   const std::vector<UVec3>& tris;
+  float pad;  ///< every stored child box reaches at least this far beyond its triangles (Hbvh::boxPadding)
+  /// The largest magnitude of a stored plane (of a QNode: origin + q scale, as a real number),
+  /// as float bits, made by fill.
+  std::atomic<uint32_t> planeBound{0};
 
   /// The children of the 8-wide node collapsed from inner node n (a lone leaf is the root's
   /// only child); returns how many.
@@ -651,6 +655,31 @@ struct Hbvh::Flattener {
     return depth + 1;
   }
 
+  /// x moved outwards by at least `pad`: down (lo) or up (hi), rounded outwards.
+  static float padOut(float x, float pad, bool up) {
+    if (pad == 0.0f || !std::isfinite(x)) return x;
+    const double y = up ? double(x) + pad : double(x) - pad;
+    float f = float(y);
+    if (up ? double(f) < y : double(f) > y) f = std::nextafter(f, up ? kInf : -kInf);
+    return f;
+  }
+  Bounds3 padded(const Bounds3& b) const {
+    Bounds3 out;
+    for (int a = 0; a < 3; ++a) {
+      out.lo[a] = padOut(b.lo[a], pad, false);
+      out.hi[a] = padOut(b.hi[a], pad, true);
+    }
+    return out;
+  }
+  void notePlanes(double magnitude) {
+    const float f = float(magnitude) * (1.0f + 0x1p-20f);  // rounded up, with room
+    uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    uint32_t seen = planeBound.load(std::memory_order_relaxed);
+    while (bits > seen && !planeBound.compare_exchange_weak(seen, bits, std::memory_order_relaxed)) {
+    }
+  }
+
   /// The float the traversal computes for quantized plane q (enterBoxesQ): origin + q scale.
   static float dequantize(float origin, float scale, int q) {
     const float offset = float(q) * scale;  // exact: scale is a power of two
@@ -658,9 +687,9 @@ struct Hbvh::Flattener {
   }
   /// Quantize the kids' boxes into `out` relative to their union, each plane rounded outwards
   /// so that the floats the traversal makes contain the kid's box (checked as it computes them).
-  static void quantize(const BuildNode* const* kids, int k, QNode& out) {
+  static void quantize(const Bounds3* kids, int k, QNode& out) {
     Bounds3 box;
-    for (int i = 0; i < k; ++i) box.extend(kids[i]->box);
+    for (int i = 0; i < k; ++i) box.extend(kids[i]);
     for (int a = 0; a < 3; ++a) {
       const float lo = box.lo[a], hi = box.hi[a];
       // The smallest power of two whose 255 steps from lo reach hi, as the traversal adds.
@@ -673,7 +702,7 @@ struct Hbvh::Flattener {
       for (int i = 0; i < kWidth; ++i) {
         int qlo = 255, qhi = 0;  // an empty slot (masked by `used` anyway)
         if (i < k) {
-          const float cl = kids[i]->box.lo[a], ch = kids[i]->box.hi[a];
+          const float cl = kids[i].lo[a], ch = kids[i].hi[a];
           qlo = int(std::clamp(std::floor((cl - lo) / scale), 0.0f, 255.0f));
           while (qlo > 0 && dequantize(lo, scale, qlo) > cl) --qlo;
           while (qlo < 255 && dequantize(lo, scale, qlo + 1) <= cl) ++qlo;
@@ -699,15 +728,24 @@ struct Hbvh::Flattener {
     const int k = collapse(n, kids);
     Node out;
     QNode qout;
+    Bounds3 boxes[kWidth];
+    for (int i = 0; i < k; ++i) boxes[i] = padded(kids[i]->box);
+    double planes = 0.0;
     if (quant) {
-      quantize(kids, k, qout);
+      quantize(boxes, k, qout);
+      for (int a = 0; a < 3; ++a) {
+        const double origin = qout.origin[a];
+        planes = std::max({planes, std::fabs(origin), std::fabs(origin + 255.0 * double(qout.scale[a]))});
+      }
     } else {
       for (int a = 0; a < 3; ++a)
         for (int i = 0; i < kWidth; ++i) {
-          out.lo[a][i] = i < k ? kids[i]->box.lo[a] : kInf;  // an empty slot is never entered
-          out.hi[a][i] = i < k ? kids[i]->box.hi[a] : -kInf;
+          out.lo[a][i] = i < k ? boxes[i].lo[a] : kInf;  // an empty slot is never entered
+          out.hi[a][i] = i < k ? boxes[i].hi[a] : -kInf;
+          if (i < k) planes = std::max({planes, std::fabs(double(out.lo[a][i])), std::fabs(double(out.hi[a][i]))});
         }
     }
+    notePlanes(planes);
     uint32_t sphereMask = 0;
     const uint32_t sphereBase = sphere;
     for (int i = 0; i < k; ++i) {
@@ -825,6 +863,39 @@ struct Hbvh::Flattener {
   }
 };
 
+namespace {
+
+/// The largest origin component magnitude L for which the padded box test
+/// (hbvh_traverse_kernel.h, PaddedBoxRay) is conservative in a tree whose boxes are padded by at
+/// least `pad` and whose stored planes are at most `planes` in magnitude (P), or -1 for none.
+/// With u = 2^-24, 1/d = fl(1/d) (a normal float: the kernel admits |d| <= 2^64 only) and
+/// K = fl(-o (1/d)), a full node's slab distance fl(p (1/d) + K) (one FMA; a product and a sum in
+/// SSE) differs from the exact (p - o) / d by at most u (3 P + 3 L) / |d| (terms to second order
+/// in u folded in with room to spare: the relative errors of 1/d and of the final rounding,
+/// (2 + u) u |p - o| / |d|, that of K, (1 + u)^2 u |o| / |d|, and SSE's product's, (1 + u)^2 u
+/// |p| / |d|). A QNode's, fl(q fl(scale (1/d)) + fl(origin (1/d) + K)) with scale (1/d) exact (a
+/// power of two), by at most u (7 P + 4 L) / |d|: the same terms, the offset's rounding
+/// u |origin - o| / |d| and in SSE two more products' (u 3 P / |d|), and the real plane
+/// origin + q scale lying within u P of the float the build checked. So, in space, the error is
+/// at most u (8 P + 5 L), plus 2^-80 for a product or sum that underflows (2^-150 each in t,
+/// times |d| <= 2^64). A box padded by twice that or more is entered by every ray that enters the
+/// unpadded box (the entry distances come out no later and the exit ones no earlier than the
+/// exact ones; a zero direction component becomes 1e-30 and such a ray's slab on that axis
+/// extends at least pad 1e30 / |d|: the kernel requires the largest component >= 2^-40). The
+/// factor two leaves room for the watertight test's own rounding, so that the AVX and SSE
+/// kernels, which round the box distances differently, visit every leaf that holds a hit.
+/// Products stay finite (1/d <= 1e30, P and L <= 2^26).
+float paddedOriginBound(double pad, double planes) {
+  constexpr double u = 0x1p-24, limit = 0x1p26;
+  if (!(pad > 0.0) || !(planes <= limit)) return -1.0f;
+  const double bound = (pad / 2.0 - 0x1p-80 - 8.0 * u * planes) / (5.0 * u);
+  if (!(bound > 0.0)) return -1.0f;
+  const float f = float(std::min(bound, limit));
+  return double(f) <= bound ? f : std::nextafter(f, 0.0f);
+}
+
+}  // namespace
+
 nlohmann::json HbvhStats::toJson() const {
   nlohmann::json j;
   j["triangles"] = triangles;
@@ -837,6 +908,8 @@ nlohmann::json HbvhStats::toJson() const {
   j["sah_cost"] = sahCost;
   j["avg_leaf_size"] = avgLeafSize;
   j["bytes"] = bytes;
+  j["box_padding"] = boxPadding;
+  j["padded_origin_bound"] = paddedOriginBound;
   j["build_seconds"] = buildSeconds;
   return j;
 }
@@ -852,15 +925,7 @@ Hbvh::Hbvh(const Scene& scene, const HbvhBuildSettings& settings, Progress* prog
 }
 
 Bounds3 Hbvh::bounds() const {
-  Bounds3 b;
-  if (m_nodes.empty()) return b;
-  const Node& root = *reinterpret_cast<const Node*>(m_nodes.data());
-  for (int i = 0; i < kWidth; ++i)
-    if (root.lo[0][i] <= root.hi[0][i]) {
-      b.extend(Vec3(root.lo[0][i], root.lo[1][i], root.lo[2][i]));
-      b.extend(Vec3(root.hi[0][i], root.hi[1][i], root.hi[2][i]));
-    }
-  return b;
+  return m_bounds;
 }
 
 HbvhLayout Hbvh::layout() const {
@@ -978,6 +1043,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_spheres.clear();
   m_blocks.clear();
   m_stats = HbvhStats();
+  m_bounds = Bounds3();
   m_stats.triangles = builder.refs.size();
   if (builder.refs.empty()) {
     if (progress) progress->finish();
@@ -989,7 +1055,13 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   builder.build(builder.rootRange(), 0, root);
 
   // Collapse to kWidth children per node and flatten depth first.
-  Flattener flat{*this, builder.refs, positions, triangles};
+  // Every stored child box is padded outwards by 2^-16 of the largest coordinate magnitude, so that
+  // the rays whose origin lies within paddedOriginBound of the origin take Embree's one-FMA box
+  // test conservatively (paddedOriginBound, above): 24 times the largest coordinate here.
+  m_bounds = root->box;
+  const float sceneMax = maxComponent(glm::max(glm::abs(root->box.lo), glm::abs(root->box.hi)));
+  const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * 0x1p-16 + 0x1p-79) : 0.0f;
+  Flattener flat{*this, builder.refs, positions, triangles, pad};
   uint64_t binaryNodes = 0, leaves = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);
   // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
@@ -1009,6 +1081,11 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
   m_stats.bytes =
       m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_blocks.size() * sizeof(BlockLine);
+  float planes;
+  const uint32_t planeBits = flat.planeBound.load();
+  std::memcpy(&planes, &planeBits, sizeof planes);
+  m_stats.boxPadding = pad;
+  m_stats.paddedOriginBound = paddedOriginBound(pad, planes);
   // Free the build trees before timing stops.
   builder.arena.clear();
   m_stats.buildSeconds = timer.seconds();

@@ -15,6 +15,9 @@ struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
+  /// Rays whose origin components are all at most this in magnitude take the padded box test
+  /// (hbvh_traverse_kernel.h, PaddedBoxRay); -1: none.
+  float paddedOriginBound;
   // The accessors are always inlined: an out-of-line copy compiled in the AVX2 or AVX-512
   // kernels' object (as an unoptimized or sanitizer build would emit) could be the one the
   // linker keeps for the baseline kernels too (Hbvh.AvxKernelsShareNoInlineCodeWithTheBaseline).

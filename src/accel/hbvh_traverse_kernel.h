@@ -50,6 +50,8 @@ inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
 /// a b + c, rounded once: where a b is exact, the float of add(mul(a, b), c).
 inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm256_fmadd_ps(a, b, c); }
+/// a b + c: rounded once (FMA) here, twice in the SSE kernels.
+inline VFloat mulAdd(VFloat a, VFloat b, VFloat c) { return _mm256_fmadd_ps(a, b, c); }
 /// Eight bytes from p as floats.
 inline VFloat loadBytes(const uint8_t* p) {
   return _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
@@ -76,6 +78,7 @@ inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
 inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
+inline VFloat mulAdd(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
 /// Four bytes from p as floats.
 inline VFloat loadBytes(const uint8_t* p) {
   int32_t bytes;
@@ -106,26 +109,42 @@ struct BoxPlaneOffsets {
 };
 inline constexpr BoxPlaneOffsets kBoxPlaneOffsets;
 
-/// Per-ray constants of the box test.
-struct RayData {
+/// The box test's reciprocal direction: a zero component becomes a tiny one of its sign, so that
+/// 0 * inf never makes a NaN distance; the three in one division, each correctly rounded (as
+/// three scalar ones).
+inline __m128 boxReciprocal(const Ray& r) {
+  const __m128 d = _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 1.0f);
+  const __m128 signBit = _mm_set1_ps(-0.0f);
+  const __m128 tiny = _mm_or_ps(_mm_and_ps(d, signBit), _mm_set1_ps(1e-30f));
+  const __m128 small = _mm_cmplt_ps(_mm_andnot_ps(signBit, d), _mm_set1_ps(1e-30f));
+  const __m128 safe = _mm_or_ps(_mm_and_ps(small, tiny), _mm_andnot_ps(small, d));
+  return _mm_div_ps(_mm_set1_ps(1.0f), safe);
+}
+
+/// The byte offsets in a Node of the entry and exit planes on each axis (lo or hi by the sign
+/// of the direction), so that the box test has no branch: copied from kBoxPlaneOffsets (read
+/// through a pointer, each node visit had three more instructions).
+struct BoxPlanes {
+  int64_t nearOffset[3], farOffset[3];
+  explicit BoxPlanes(const Ray& r) {
+    // The sign bits of the direction (those of boxReciprocal's, which keeps a zero's sign).
+    const int negative = _mm_movemask_ps(_mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 0.0f));
+    std::memcpy(nearOffset, kBoxPlaneOffsets.near[negative], sizeof nearOffset);
+    std::memcpy(farOffset, kBoxPlaneOffsets.far[negative], sizeof farOffset);
+  }
+};
+
+/// The robust box test's per-ray constants: a slab distance is (p - o) (1/d), rounded twice,
+/// and the exit distances are widened by kSlabScale (Ize 2013), which makes the test
+/// conservative for any ray and any box.
+struct RobustBoxRay : BoxPlanes {
   VFloat org[3], invDir[3];
   /// invDir times kSlabScale, for the exit distances: (hi - o) (1/d S) rounds four times, as
   /// ((hi - o) 1/d) S did, so the widening bounds the same error, with one product less a node.
   VFloat invDirFar[3];
-  // Per axis: byte offsets in a Node of the entry and exit planes (lo or hi by the sign of the
-  // direction), so the box test has no branch; copied from kBoxPlaneOffsets (read through a
-  // pointer, each node visit had three more instructions).
-  int64_t nearOffset[3], farOffset[3];
-  explicit RayData(const Ray& r) {
-    // A zero component becomes a tiny one so that 0 * inf never makes a NaN distance; the three
-    // reciprocals in one division (each correctly rounded, as three scalar ones).
+  explicit RobustBoxRay(const Ray& r) : BoxPlanes(r) {
+    const __m128 invV = boxReciprocal(r);
     alignas(16) float inv[4], invFar[4];
-    const __m128 d = _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 1.0f);
-    const __m128 signBit = _mm_set1_ps(-0.0f);
-    const __m128 tiny = _mm_or_ps(_mm_and_ps(d, signBit), _mm_set1_ps(1e-30f));
-    const __m128 small = _mm_cmplt_ps(_mm_andnot_ps(signBit, d), _mm_set1_ps(1e-30f));
-    const __m128 safe = _mm_or_ps(_mm_and_ps(small, tiny), _mm_andnot_ps(small, d));
-    const __m128 invV = _mm_div_ps(_mm_set1_ps(1.0f), safe);
     _mm_store_ps(inv, invV);
     _mm_store_ps(invFar, _mm_mul_ps(invV, _mm_set1_ps(kSlabScale)));
     for (int a = 0; a < 3; ++a) {
@@ -133,13 +152,63 @@ struct RayData {
       invDir[a] = broadcast(inv[a]);
       invDirFar[a] = broadcast(invFar[a]);
     }
-    // The sign bit of each component swaps lo and hi. From a table: computed, the offsets
-    // were about 30 of the 940 instructions a bunny shadow ray ran (callgrind, AVX2).
-    const int negative = _mm_movemask_ps(safe) & 7;
-    std::memcpy(nearOffset, kBoxPlaneOffsets.near[negative], sizeof nearOffset);
-    std::memcpy(farOffset, kBoxPlaneOffsets.far[negative], sizeof farOffset);
   }
+  VFloat nearT(VFloat plane, int a) const { return mul(sub(plane, org[a]), invDir[a]); }
+  VFloat farT(VFloat plane, int a) const { return mul(sub(plane, org[a]), invDirFar[a]); }
+  /// A QNode's planes on axis a: dequantized (origin + q scale, in float, as the build checked
+  /// it), then the same distances.
+  struct QAxis {
+    VFloat scale, origin;
+  };
+  QAxis qAxis(const QNode& n, int a) const { return {broadcast(n.scale[a]), broadcast(n.origin[a])}; }
+  VFloat nearQ(VFloat q, const QAxis& x, int a) const { return nearT(mulAddExactProduct(q, x.scale, x.origin), a); }
+  VFloat farQ(VFloat q, const QAxis& x, int a) const { return farT(mulAddExactProduct(q, x.scale, x.origin), a); }
 };
+
+/// The padded box test's per-ray constants: a slab distance is p (1/d) + K with K = -o (1/d),
+/// one FMA (Embree's form; a product and a sum in the SSE kernels), with no widening. Its
+/// rounding error is an absolute one, which the boxes' padding covers for the rays
+/// paddedBoxesHold admits (Hbvh::kBoxPadding says how).
+struct PaddedBoxRay : BoxPlanes {
+  VFloat invDir[3], orgInv[3];  ///< 1/d and K
+  explicit PaddedBoxRay(const Ray& r) : BoxPlanes(r) {
+    const __m128 invV = boxReciprocal(r);
+    alignas(16) float inv[4], k[4];
+    _mm_store_ps(inv, invV);
+    const __m128 o = _mm_setr_ps(r.origin.x, r.origin.y, r.origin.z, 0.0f);
+    _mm_store_ps(k, _mm_xor_ps(_mm_mul_ps(o, invV), _mm_set1_ps(-0.0f)));  // -(o (1/d)), rounded once
+    for (int a = 0; a < 3; ++a) {
+      invDir[a] = broadcast(inv[a]);
+      orgInv[a] = broadcast(k[a]);
+    }
+  }
+  VFloat nearT(VFloat plane, int a) const { return mulAdd(plane, invDir[a], orgInv[a]); }
+  VFloat farT(VFloat plane, int a) const { return mulAdd(plane, invDir[a], orgInv[a]); }
+  /// A QNode's planes on axis a: (origin + q scale) (1/d) + K = q (scale (1/d)) + (origin (1/d)
+  /// + K), with scale (1/d) exact (scale is a power of two), so a plane costs one FMA, as a
+  /// full node's.
+  struct QAxis {
+    VFloat scaleInv, offset;
+  };
+  QAxis qAxis(const QNode& n, int a) const {
+    return {mul(broadcast(n.scale[a]), invDir[a]), mulAdd(broadcast(n.origin[a]), invDir[a], orgInv[a])};
+  }
+  VFloat nearQ(VFloat q, const QAxis& x, int) const { return mulAdd(q, x.scaleInv, x.offset); }
+  VFloat farQ(VFloat q, const QAxis& x, int) const { return mulAdd(q, x.scaleInv, x.offset); }
+};
+
+/// Whether the padded test is conservative for this ray in this tree (hbvh_build.cpp,
+/// paddedOriginBound, derives the bound): every origin component within it in magnitude, every
+/// direction component at most 2^64 (so that 1/d is a normal float) and the largest at least
+/// 2^-40. NaN fails.
+inline bool paddedBoxesHold(const HbvhArrays& bvh, const Ray& r) {
+  const __m128 signBit = _mm_set1_ps(-0.0f);
+  const __m128 o = _mm_andnot_ps(signBit, _mm_setr_ps(r.origin.x, r.origin.y, r.origin.z, 0.0f));
+  const __m128 d = _mm_andnot_ps(signBit, _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 0.0f));
+  const __m128 ok =
+      _mm_and_ps(_mm_cmple_ps(o, _mm_set1_ps(bvh.paddedOriginBound)), _mm_cmple_ps(d, _mm_set1_ps(0x1p64f)));
+  return _mm_movemask_ps(ok) == 0xf && (_mm_movemask_ps(_mm_cmpge_ps(d, _mm_set1_ps(0x1p-40f))) & 7) != 0;
+}
 
 /// The sphere test's per-ray constants (a square root and a division), made on the first sphere
 /// a ray meets: few children keep one (74 of the dragon's 161k).
@@ -152,45 +221,41 @@ struct SphereRay {
   }
 };
 
-/// The slab test of one register's width of children, `plane(offset, axis)` loading the plane
-/// at a Node's byte offset `offset` (RayData's near and far offsets): their entry distances into
-/// tNearOut and the mask of those entered, from bit 0.
+/// The slab test of one register's width of children: their entry distances into tNearOut and
+/// the mask of those entered, from bit 0; nearT(a) and farT(a) give the entry and exit distances
+/// of the children's planes on axis a.
 /// Distances are ordered as 32-bit integers (one cycle a minimum, against four for floats; as
 /// Embree's kernels do), which orders floats of which one at least is not negative: the entry
 /// distance is the largest of the planes' and tMin >= 0 (Hbvh::intersect clamps it), so it is
 /// the float maximum; an exit distance is the float minimum where all are >= 0, and a negative
 /// one where any is, which no entry distance is at or below (a box left at t = -0, where -0
 /// orders below +0, holds nothing in the open interval (tMin, tMax)).
-template <class Plane>
-[[gnu::always_inline]] inline int slabTest(Plane plane, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
-  const auto slab = [&](const int64_t* offsets, const VFloat* inv, int a) {
-    return mul(sub(plane(offsets[a], a), rd.org[a]), inv[a]);
-  };
-  const auto nearSlab = [&](int a) { return slab(rd.nearOffset, rd.invDir, a); };
-  const auto farSlab = [&](int a) { return slab(rd.farOffset, rd.invDirFar, a); };
-  const VFloat tNear = imax(imax(tMin, nearSlab(0)), imax(nearSlab(1), nearSlab(2)));
-  const VFloat tFar = imin(imin(farSlab(0), farSlab(1)), imin(farSlab(2), tMax));
+template <class NearT, class FarT>
+[[gnu::always_inline]] inline int slabTest(NearT nearT, FarT farT, VFloat tMin, VFloat tMax, float* tNearOut) {
+  const VFloat tNear = imax(imax(tMin, nearT(0)), imax(nearT(1), nearT(2)));
+  const VFloat tFar = imin(imin(farT(0), farT(1)), imin(farT(2), tMax));
   store(tNearOut, tNear);
   return lessEqualMask(tNear, tFar);
 }
 
 /// The slab test of a Node's children from `first` on (tNearOut[first..]).
-inline int enterBoxes(const Node& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
+template <class BoxRay>
+inline int enterBoxes(const Node& n, int first, const BoxRay& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
-  const auto plane = [&](int64_t offset, int) { return load(reinterpret_cast<const float*>(base + offset)); };
-  return slabTest(plane, rd, tMin, tMax, tNearOut + first);
+  const auto plane = [&](int64_t offset) { return load(reinterpret_cast<const float*>(base + offset)); };
+  return slabTest([&](int a) { return rd.nearT(plane(rd.nearOffset[a]), a); },
+                  [&](int a) { return rd.farT(plane(rd.farOffset[a]), a); }, tMin, tMax, tNearOut + first);
 }
 
-/// enterBoxes for a QNode: each plane dequantized (origin + q scale, in float, as the build
-/// checked it), then the same slab test. A plane's bytes lie at a quarter of its floats' offset
-/// in a Node (lo[a] at 32 a bytes there, 8 a here; hi at 96 + 32 a, 24 + 8 a), from lo on.
-inline int enterBoxesQ(const QNode& n, int first, const RayData& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
+/// enterBoxes for a QNode. A plane's bytes lie at a quarter of its floats' offset in a Node
+/// (lo[a] at 32 a bytes there, 8 a here; hi at 96 + 32 a, 24 + 8 a), from lo on.
+template <class BoxRay>
+inline int enterBoxesQ(const QNode& n, int first, const BoxRay& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const uint8_t* base = &n.lo[0][0] + first;
-  const auto plane = [&](int64_t offset, int a) {
-    const VFloat q = loadBytes(base + (offset >> 2));
-    return mulAddExactProduct(q, broadcast(n.scale[a]), broadcast(n.origin[a]));  // q scale is exact
-  };
-  return slabTest(plane, rd, tMin, tMax, tNearOut + first);
+  const typename BoxRay::QAxis axis[3] = {rd.qAxis(n, 0), rd.qAxis(n, 1), rd.qAxis(n, 2)};
+  return slabTest([&](int a) { return rd.nearQ(loadBytes(base + (rd.nearOffset[a] >> 2)), axis[a], a); },
+                  [&](int a) { return rd.farQ(loadBytes(base + (rd.farOffset[a] >> 2)), axis[a], a); }, tMin, tMax,
+                  tNearOut + first);
 }
 static_assert(offsetof(Node, lo) == 0 && offsetof(Node, hi) == 4 * (offsetof(QNode, hi) - offsetof(QNode, lo)),
               "a QNode's planes lie at a quarter of a Node's offsets");
@@ -228,8 +293,8 @@ template <class NodeT>
 }
 
 /// Entry distances of the eight children and the mask of those entered.
-template <class NodeT>
-inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, const RayData& rd, SphereRay& sr,
+template <class NodeT, class BoxRay>
+inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, const BoxRay& rd, SphereRay& sr,
                          float tMin, float tMax, float tNearOut[kWidth]) {
   const VFloat tMinV = broadcast(tMin), tMaxV = broadcast(tMax);
   const auto boxes = [&](int first) {
@@ -249,7 +314,8 @@ inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, co
 
 /// enterChildren for the node `ref` refers to (a QNode where kQuantBit is set); `child` gets the
 /// node's child references.
-[[gnu::always_inline]] inline int enterNode(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const RayData& rd,
+template <class BoxRay>
+[[gnu::always_inline]] inline int enterNode(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const BoxRay& rd,
                                             SphereRay& sr, float tMin, float tMax, float tNearOut[kWidth],
                                             const uint32_t*& child) {
   if (ref & kQuantBit) {
@@ -359,30 +425,43 @@ inline bool visitLeaf(const float* leaf, uint32_t packets, PairFn pair, SingleFn
   return (packets & 1u) && single(block);
 }
 
-/// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, hit),
-/// a pair at a time against the same tMax, lanes in order. True when one was closer.
-inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
-                           Hit& hit) {
-  bool found = false;
+/// The next float above x >= 0 (x itself if infinite).
+inline float nextUp(float x) {
+  uint32_t bits;
+  std::memcpy(&bits, &x, sizeof bits);
+  bits += bits < 0x7f800000u;
+  std::memcpy(&x, &bits, sizeof x);
+  return x;
+}
+
+/// The leaf of `packets` packets at `leaf` against the closest-hit query so far (tMax, and hit
+/// where found), a pair at a time, lanes in order. Of hits at the same distance the one of the
+/// smaller triangle id wins, as in a brute-force loop over the ids: so the hit does not depend on
+/// the order in which leaves are visited, which the kernels' box distances decide (rounded once
+/// in the AVX2 and AVX-512 kernels, twice in the SSE ones), but only on which are visited; hence
+/// a hit at tMax is a candidate once there is one (the packet test's limit the next float up).
+inline void closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
+                           Hit& hit, bool& found) {
   alignas(32) float t[8], b1[8], b2[8];
   const auto take = [&](int mask, const float* block, int stride) {
     for (; mask; mask &= mask - 1) {
       const int i = __builtin_ctz(static_cast<unsigned>(mask));
-      if (t[i] < tMax) {
+      const uint32_t id = laneId(block, stride, i);
+      if (t[i] < tMax || (t[i] == tMax && id < hit.triangle)) {  // at tMax only once found (the limit below)
         tMax = t[i];
-        hit = {t[i], laneId(block, stride, i), b1[i], b2[i]};
+        hit = {t[i], id, b1[i], b2[i]};
         found = true;
       }
     }
     return false;  // every packet of the leaf
   };
+  const auto limit = [&] { return found ? nextUp(tMax) : tMax; };
   visitLeaf(
       leaf, packets,
-      [&](const float* block) { return take(intersectPair(block, ray, rl, tMax, t, b1, b2), block, kPairStride); },
+      [&](const float* block) { return take(intersectPair(block, ray, rl, limit(), t, b1, b2), block, kPairStride); },
       [&](const float* block) {
-        return take(intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2), block, kSingleStride);
+        return take(intersectPackets<F4>(block, kSingleStride, ray, rl, limit(), t, b1, b2), block, kSingleStride);
       });
-  return found;
 }
 
 /// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
@@ -490,8 +569,11 @@ inline void farFirst(Entry& a, Entry& b) {
   b = lo;
 }
 
-std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
-  const RayData rd(ray);
+namespace {
+
+template <class BoxRay>
+std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
+  const BoxRay rd(ray);
   SphereRay sr;
   LeafRay leafRay;
   const float tMin = ray.tMin;
@@ -561,7 +643,7 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
       // Leaf: test its packets, shrinking tMax to the nearest hit.
       VOXCONE_COUNT(leaves, 1);
       VOXCONE_COUNT(packets, leafPackets(cur));
-      found |= closerHitsLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax, hit);
+      closerHitsLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax, hit, found);
     }
   pop:
     // The next child still in front of the closest hit.
@@ -576,8 +658,9 @@ std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
   }
 }
 
-bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
-  const RayData rd(ray);
+template <class BoxRay>
+bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
+  const BoxRay rd(ray);
   SphereRay sr;
   LeafRay leafRay;
   const float tMin = ray.tMin;
@@ -599,6 +682,7 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       // whose children are mostly its leaves, laid out after it, the first: farthest there too
       // took the dragon to 1.02 (its leaves are tested in fewer numbers but out of order).
       const int first = __builtin_ctz(static_cast<unsigned>(mask));
+      if (mask & (mask - 1)) prefetchChildren(bvh, child, mask);
       const int next = (cur & kQuantBit) || !(mask & (mask - 1)) ? first : farthestChild(tNear, mask);
       cur = child[next];
       sp = pushChildren(sp, child, mask & ~(1 << next));
@@ -613,6 +697,17 @@ bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
     cur = *--sp;
     if (sp != stack) prefetchRef(bvh, sp[-1]);
   }
+}
+
+}  // namespace
+
+std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
+  return paddedBoxesHold(bvh, ray) ? intersectWith<PaddedBoxRay>(bvh, ray) : intersectWith<RobustBoxRay>(bvh, ray);
+}
+
+bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
+  return paddedBoxesHold(bvh, ray) ? occludedWith<PaddedBoxRay>(bvh, ray, tMax)
+                                   : occludedWith<RobustBoxRay>(bvh, ray, tMax);
 }
 
 }  // namespace VOXCONE_ISA

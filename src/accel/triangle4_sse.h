@@ -162,9 +162,9 @@ struct alignas(32) RayTriLanes {
 
 /// The watertight test (triangle.h) on F::kLanes triangles at once (the rows of `base`,
 /// `stride` floats apart; F8 needs stride 8), with the same operations in the same order as the
-/// scalar test, so both give the same t. Lanes where an edge function is exactly zero are redone by the scalar test, which
-/// resolves them in double precision. Returns the mask of lanes hit in (tMin, tMax) and their t
-/// and barycentrics.
+/// scalar test, so both give the same t and the same answer. Lanes where an edge function is
+/// exactly zero are redone by the scalar test, which resolves them in double precision. Returns
+/// the mask of lanes hit in (tMin, tMax) and their t and barycentrics.
 template <class F>
 inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
                             float* tOut, float* b1Out, float* b2Out) {
@@ -201,11 +201,12 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
   const F detSign = det & signMask;
   const F detAbs = det ^ detSign;
   const F tAbs = tScaled ^ detSign;
-  valid = valid & (tAbs > rl.get<F>(R::kTMin) * detAbs) & (tAbs < F::broadcast(tMax) * detAbs);
+  valid = valid & (tAbs > rl.get<F>(R::kTMin) * detAbs) & (tAbs <= F::broadcast(tMax * kTMaxPrefilter) * detAbs);
   int mask = valid.mask() & ~zeroLanes;
   if (mask) {
     const F invDet = F::broadcast(1.0f) / det;
     const F t = tScaled * invDet;
+    mask &= (t < F::broadcast(tMax)).mask();  // as the scalar test: the divided distance decides
     // Only distances above their own rounding error (watertightDistanceError, lane by lane).
     const auto abs = [&](F a) { return andNot(signMask, a); };
     const auto max3 = [&](F a, F b, F c) { return max(abs(a), max(abs(b), abs(c))); };

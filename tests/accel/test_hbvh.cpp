@@ -89,11 +89,12 @@ Soup cornellSoup() {
   return {"cornell", sc.positions, sc.triangles};
 }
 
-/// Random rays: from points in an enlarged bounding box towards random points, vertices and
-/// edge points of the mesh.
-Ray makeRay(const Soup& s, const Bounds3& b, Rng& rng) {
+/// Random rays: from points in an enlarged bounding box (or from `origin`) towards random points,
+/// vertices and edge points of the mesh.
+Ray makeRay(const Soup& s, const Bounds3& b, Rng& rng, const std::optional<Vec3>& origin = std::nullopt) {
   const Vec3 ext = b.diagonal() * 1.5f + Vec3(1e-3f);
-  const Vec3 o = b.center() + (Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5f) * ext;
+  Vec3 o = b.center() + (Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5f) * ext;
+  if (origin) o = *origin;
   Vec3 target;
   const float kind = rng.uniform();
   const UVec3& t = s.tris[std::min<size_t>(size_t(rng.uniform() * s.tris.size()), s.tris.size() - 1)];
@@ -126,6 +127,9 @@ bool sameHitDistance(float a, float b) { return std::fabs(a - b) <= 1e-5f * std:
 struct Variant {
   std::string name;
   std::function<std::unique_ptr<Accel>(const Soup&)> build;
+  /// The HBVH keeps the smaller triangle id of hits at the same distance, as bruteIntersect does,
+  /// so it finds the very same hit; the kd-tree the first it visits (sameHitDistance).
+  bool exact = true;
 };
 
 constexpr int kAllQuantized = 1 << 30, kNoneQuantized = 0;  ///< HbvhBuildSettings::quantizeBelow
@@ -170,8 +174,8 @@ std::vector<Variant> variants() {
                             {"hbvh-full-nodes", hbvh(1.0f, 8, host, kNoneQuantized)},
                             {"hbvh-all-spheres-full-nodes", hbvh(100.0f, 2, host, kNoneQuantized)},
                             {"hbvh-quantized-below-64", hbvh(1.0f, 8, host, 64)},
-                            {"kdtree", kd(32, 8, 1.0f)},
-                            {"kdtree-deep", kd(7, 1, 20.0f)}};
+                            {"kdtree", kd(32, 8, 1.0f), false},
+                            {"kdtree-deep", kd(7, 1, 20.0f), false}};
   if (host != Hbvh::Simd::Sse42) {
     v.push_back({"hbvh-sse4.2", hbvh(1.0f, 8, Hbvh::Simd::Sse42)});
     v.push_back({"hbvh-all-spheres-sse4.2", hbvh(100.0f, 2, Hbvh::Simd::Sse42)});
@@ -208,12 +212,14 @@ TEST(Accel, EveryStructureMatchesBruteForceOnOverAMillionRays) {
         for (int i = block * 1024; i < (block + 1) * 1024; ++i) {
           const Ray& r = rays[i];
           const auto got = accel->intersect(r);
-          if (ref[i].has_value() != got.has_value() || (got && !sameHitDistance(ref[i]->t, got->t))) {
+          if (ref[i].has_value() != got.has_value() ||
+              (got && (v.exact ? got->t != ref[i]->t || got->triangle != ref[i]->triangle
+                               : !sameHitDistance(ref[i]->t, got->t)))) {
             ++closest;
           }
           // Occlusion up to tOcc: something lies in (tMin, tOcc) exactly when the closest hit does.
           const float tOcc = ref[i] ? ref[i]->t * (0.5f + rng.uniform()) : r.tMax;
-          if (ref[i] && sameHitDistance(ref[i]->t, tOcc)) continue;
+          if (!v.exact && ref[i] && sameHitDistance(ref[i]->t, tOcc)) continue;
           if (accel->occluded(r, tOcc) != (ref[i] && ref[i]->t < tOcc)) ++occlusion;
         }
       });
@@ -484,6 +490,57 @@ TEST(Hbvh, SimdKernelsFindTheSameHitsBitForBit) {
         }
         EXPECT_EQ(differ, 0) << Hbvh::simdName(wide) << " " << s.name << " sphere ratio " << ratio
                              << " quantized below " << quantizeBelow;
+        EXPECT_GT(hits, 5000) << s.name;
+      }
+    }
+  }
+}
+
+TEST(Hbvh, PaddedAndRobustBoxTestsFindTheBruteForceHits) {
+  // Rays from origins within the padded bound take the one-FMA box test, whose rounding is an
+  // absolute error the boxes' padding covers; rays from farther take the robust one. Meshes small
+  // and far from the origin (where that error is largest against the boxes), rays towards
+  // vertices and edges, origins on both sides of the bound: every kernel finds brute force's
+  // very hit (distance and triangle) and its occlusion, with full and quantized nodes.
+  const std::vector<Hbvh::Simd> kernels = Hbvh::runnableSimds();
+  for (const Soup& mesh : {randomSoup(600, 31), gridSoup(16)}) {
+    Soup s = mesh;
+    for (Vec3& p : s.pos) p = Vec3(1000.0f, -700.0f, 3000.0f) + 0.01f * p;
+    Bounds3 b;
+    for (const Vec3& p : s.pos) b.extend(p);
+    for (const int quantizeBelow : {kNoneQuantized, kAllQuantized}) {
+      HbvhBuildSettings settings;
+      settings.quantizeBelow = quantizeBelow;
+      settings.quantizeMinTriangles = 0;
+      Hbvh bvh(s.pos, s.tris, settings);
+      const float bound = bvh.stats().paddedOriginBound;
+      const float largest = maxComponent(glm::max(glm::abs(b.lo), glm::abs(b.hi)));
+      EXPECT_EQ(bvh.stats().boxPadding, float(largest * 0x1p-16 + 0x1p-79));
+      EXPECT_GT(bound, 23.0f * largest);  // 24 times the largest coordinate
+      EXPECT_LT(bound, 24.0f * largest);
+      for (Hbvh::Simd simd : kernels) {
+        bvh.setSimd(simd);
+        Rng rng(37, 0);
+        int padded = 0, robust = 0, hits = 0, differ = 0;
+        for (int i = 0; i < 30000; ++i) {
+          std::optional<Vec3> origin;
+          if (i % 2) {  // a point on a cube's face, 0.9 .. 1.1 times the bound: either side of it
+            Vec3 o = (2.0f * Vec3(rng.uniform(), rng.uniform(), rng.uniform()) - 1.0f);
+            o[std::min(2, int(3.0f * rng.uniform()))] = rng.uniform() < 0.5f ? -1.0f : 1.0f;
+            origin = o * (bound * (0.9f + 0.2f * rng.uniform()));
+          }
+          const Ray r = makeRay(s, b, rng, origin);
+          (maxComponent(glm::abs(r.origin)) <= bound ? padded : robust) += 1;
+          const auto ref = bruteIntersect(s, r), got = bvh.intersect(r);
+          hits += ref.has_value();
+          if (ref.has_value() != got.has_value() || (got && (got->t != ref->t || got->triangle != ref->triangle)))
+            ++differ;
+          const float tOcc = ref ? ref->t * (0.5f + rng.uniform()) : r.tMax;
+          if (bvh.occluded(r, tOcc) != (ref && ref->t < tOcc)) ++differ;
+        }
+        EXPECT_EQ(differ, 0) << s.name << " " << Hbvh::simdName(simd) << " quantized below " << quantizeBelow;
+        EXPECT_GT(padded, 15000);
+        EXPECT_GT(robust, 5000);
         EXPECT_GT(hits, 5000) << s.name;
       }
     }

@@ -76,6 +76,13 @@ struct HbvhStats {
   double sahCost = 0.0;       ///< SAH cost of the binary tree, relative to the root's area
   double avgLeafSize = 0.0;
   uint64_t bytes = 0;         ///< memory of nodes, spheres and triangle data
+  /// Every stored child box reaches at least this far beyond its triangles' bounds: 2^-16 of the
+  /// largest coordinate magnitude (0 in scenes beyond 2^26).
+  float boxPadding = 0.0f;
+  /// Rays whose origin components are at most this in magnitude take the padded box test (one
+  /// FMA a plane, Embree's form, conservative thanks to the padding); others the robust one
+  /// (Ize's). -1: none. hbvh_build.cpp, paddedOriginBound, derives it.
+  float paddedOriginBound = -1.0f;
   double buildSeconds = 0.0;
   nlohmann::json toJson() const;
 };
@@ -210,6 +217,7 @@ private:
   HbvhBuildSettings m_settings;
   HbvhStats m_stats;
   Simd m_simd = hostSimd();
+  Bounds3 m_bounds;  ///< of the triangles (the stored boxes are padded)
   std::vector<NodeSlot, HugePageAllocator<NodeSlot>> m_nodes;  ///< the Nodes, depth first, the root at slot 0
   std::vector<Vec4> m_spheres;      ///< centre xyz, radius w, only for children that keep one
   /// QNodes and leaves (BlockLine), depth first: a node's leaves, then its inner children's parts.

@@ -97,6 +97,12 @@ inline float watertightDistanceError(float ax, float ay, float az, float bx, flo
   return 3.0f * (errorGamma(3) * (maxE * maxZ) + deltaE * maxZ + deltaZ * maxE) * std::fabs(invDet);
 }
 
+/// The watertight tests compare the scaled distance with tMax times this before they divide, and
+/// the divided distance t with tMax itself: t < tMax, whatever rounding the products make (t is
+/// within 4 ulps of the scaled distance over det; this loosens by 16), so that which of two hits
+/// at the same t a traversal keeps can be made independent of its order (Hbvh).
+constexpr float kTMaxPrefilter = 1.0f + 0x1p-20f;
+
 /// Test ray (origin, wr) against triangle (p0, p1, p2) for t in (tMin, tMax). On a hit writes t
 /// and barycentrics (b1, b2) of p1 and p2 and returns true. Both sides hit. A hit counts only
 /// where its t exceeds its own error bound (watertightDistanceError) as well as tMin.
@@ -122,13 +128,17 @@ inline bool intersectTriangleWatertight(const Vec3& origin, const WatertightRay&
   if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
   const float det = u + v + w;
   if (det == 0.0f) return false;
-  // Scaled hit distance, compared against the range before dividing.
+  // Scaled hit distance, compared against the range before dividing (tMax loosened: the divided
+  // distance decides, below).
   const float az = wr.sz * A[wr.kz], bz = wr.sz * B[wr.kz], cz = wr.sz * C[wr.kz];
   const float tScaled = u * az + v * bz + w * cz;
-  if (det < 0.0f ? (tScaled >= tMin * det || tScaled <= tMax * det) : (tScaled <= tMin * det || tScaled >= tMax * det))
+  const float tMaxLoose = tMax * kTMaxPrefilter;
+  if (det < 0.0f ? (tScaled >= tMin * det || tScaled < tMaxLoose * det)
+                 : (tScaled <= tMin * det || tScaled > tMaxLoose * det))
     return false;
   const float invDet = 1.0f / det;
   const float t = tScaled * invDet;
+  if (!(t < tMax)) return false;
   if (!(t > watertightDistanceError(ax, ay, az, bx, by, bz, cx, cy, cz, u, v, w, invDet))) return false;
   tOut = t;
   b1Out = v * invDet;
