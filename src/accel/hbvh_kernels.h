@@ -14,6 +14,7 @@ namespace voxcone {
 struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
+  size_t sphereCount;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
   /// Rays whose origin components are all at most this in magnitude take the padded box test
   /// (hbvh_traverse_kernel.h, PaddedBoxRay); -1: none.

@@ -119,16 +119,16 @@ Kernels kernelsFor(Hbvh::Simd simd) {
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
   if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data()),
-                          m_stats.paddedOriginBound};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_spheres.size(),
+                          reinterpret_cast<const unsigned char*>(m_blocks.data()), m_stats.paddedOriginBound};
   return kernelsFor(m_simd).intersect(arrays, ray);
 }
 
 bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
   if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data()),
-                          m_stats.paddedOriginBound};
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_spheres.size(),
+                          reinterpret_cast<const unsigned char*>(m_blocks.data()), m_stats.paddedOriginBound};
   return kernelsFor(m_simd).occluded(arrays, ray, tMax);
 }
 

@@ -293,7 +293,7 @@ template <class NodeT>
 }
 
 /// Entry distances of the eight children and the mask of those entered.
-template <class NodeT, class BoxRay>
+template <bool kSpheres, class NodeT, class BoxRay>
 inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, const BoxRay& rd, SphereRay& sr,
                          float tMin, float tMax, float tNearOut[kWidth]) {
   const VFloat tMinV = broadcast(tMin), tMaxV = broadcast(tMax);
@@ -307,25 +307,27 @@ inline int enterChildren(const NodeT& n, const Vec4* spheres, const Ray& ray, co
   int mask = boxes(0) | boxes(4) << 4;
 #endif
   if constexpr (std::is_same_v<NodeT, QNode>) mask &= int(n.used);
-  if (__builtin_expect((mask & n.sphereMask) != 0, 0))
-    mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
+  if constexpr (kSpheres) {
+    if (__builtin_expect((mask & n.sphereMask) != 0, 0))
+      mask = cullSpheres(n, spheres, ray, sr, mask, tMin, tMax, tNearOut);
+  }
   return mask;
 }
 
 /// enterChildren for the node `ref` refers to (a QNode where kQuantBit is set); `child` gets the
 /// node's child references.
-template <class BoxRay>
+template <bool kSpheres, class BoxRay>
 [[gnu::always_inline]] inline int enterNode(const HbvhArrays& bvh, uint32_t ref, const Ray& ray, const BoxRay& rd,
                                             SphereRay& sr, float tMin, float tMax, float tNearOut[kWidth],
                                             const uint32_t*& child) {
   if (ref & kQuantBit) {
     const QNode& n = bvh.qnode(ref);
     child = n.child;
-    return enterChildren(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
+    return enterChildren<kSpheres>(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
   }
   const Node& n = bvh.node(ref);
   child = n.child;
-  return enterChildren(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
+  return enterChildren<kSpheres>(n, bvh.spheres, ray, rd, sr, tMin, tMax, tNearOut);
 }
 
 /// The packet test's constants, made at a ray's first leaf: most primary rays (62% miss the
@@ -399,13 +401,15 @@ inline uint32_t laneId(const float* block, int stride, int lane) {
 }
 
 /// Eight lanes of pair `block`: the mask of those hit, their t and barycentrics.
+/// With kDefer, negative where a lane needs the scalar test (intersectPackets' kEdgeLanes).
+template <bool kDefer>
 inline int intersectPair(const float* block, const Ray& ray, const RayTriLanes& rl, float tMax, float* t, float* b1,
                          float* b2) {
 #ifdef __AVX2__
-  return intersectPackets<F8>(block, kPairStride, ray, rl, tMax, t, b1, b2);
+  return intersectPackets<F8, kDefer>(block, kPairStride, ray, rl, tMax, t, b1, b2);
 #else
-  return intersectPackets<F4>(block, kPairStride, ray, rl, tMax, t, b1, b2) |
-         intersectPackets<F4>(block + 4, kPairStride, ray, rl, tMax, t + 4, b1 + 4, b2 + 4) << 4;
+  return intersectPackets<F4, kDefer>(block, kPairStride, ray, rl, tMax, t, b1, b2) |
+         intersectPackets<F4, kDefer>(block + 4, kPairStride, ray, rl, tMax, t + 4, b1 + 4, b2 + 4) * 16;
 #endif
 }
 
@@ -440,10 +444,14 @@ inline float nextUp(float x) {
 /// the order in which leaves are visited, which the kernels' box distances decide (rounded once
 /// in the AVX2 and AVX-512 kernels, twice in the SSE ones), but only on which are visited; hence
 /// a hit at tMax is a candidate once there is one (the packet test's limit the next float up).
-inline void closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
+/// With kDefer, returns true where a lane needs the scalar test, having stopped there (the caller
+/// starts the ray again with the full kernel).
+template <bool kDefer>
+inline bool closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float& tMax,
                            Hit& hit, bool& found) {
   alignas(32) float t[8], b1[8], b2[8];
   const auto take = [&](int mask, const float* block, int stride) {
+    if (mask < 0) return true;  // kDefer's kEdgeLanes
     for (; mask; mask &= mask - 1) {
       const int i = __builtin_ctz(static_cast<unsigned>(mask));
       const uint32_t id = laneId(block, stride, i);
@@ -456,20 +464,33 @@ inline void closerHitsLeaf(const float* leaf, uint32_t packets, const Ray& ray, 
     return false;  // every packet of the leaf
   };
   const auto limit = [&] { return found ? nextUp(tMax) : tMax; };
-  visitLeaf(
+  return visitLeaf(
       leaf, packets,
-      [&](const float* block) { return take(intersectPair(block, ray, rl, limit(), t, b1, b2), block, kPairStride); },
       [&](const float* block) {
-        return take(intersectPackets<F4>(block, kSingleStride, ray, rl, limit(), t, b1, b2), block, kSingleStride);
+        return take(intersectPair<kDefer>(block, ray, rl, limit(), t, b1, b2), block, kPairStride);
+      },
+      [&](const float* block) {
+        return take(intersectPackets<F4, kDefer>(block, kSingleStride, ray, rl, limit(), t, b1, b2), block,
+                    kSingleStride);
       });
 }
 
-/// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax).
-inline bool anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float tMax) {
+/// Any hit in the leaf of `packets` packets at `leaf` in (tMin, tMax): 1 or 0; with kDefer, -1
+/// where a lane needs the scalar test (the caller starts the ray again with the full kernel).
+template <bool kDefer>
+inline int anyHitLeaf(const float* leaf, uint32_t packets, const Ray& ray, const RayTriLanes& rl, float tMax) {
   alignas(32) float t[8], b1[8], b2[8];
-  return visitLeaf(
-      leaf, packets, [&](const float* block) { return intersectPair(block, ray, rl, tMax, t, b1, b2) != 0; },
-      [&](const float* block) { return intersectPackets<F4>(block, kSingleStride, ray, rl, tMax, t, b1, b2) != 0; });
+  int result = 0;
+  const auto stop = [&](int mask) {
+    result = mask < 0 ? -1 : mask != 0;
+    return mask != 0;
+  };
+  visitLeaf(
+      leaf, packets, [&](const float* block) { return stop(intersectPair<kDefer>(block, ray, rl, tMax, t, b1, b2)); },
+      [&](const float* block) {
+        return stop(intersectPackets<F4, kDefer>(block, kSingleStride, ray, rl, tMax, t, b1, b2));
+      });
+  return result;
 }
 
 #if defined(__AVX2__) && !defined(__AVX512VL__)
@@ -571,7 +592,11 @@ inline void farFirst(Entry& a, Entry& b) {
 
 namespace {
 
-template <class BoxRay>
+/// kFull: the kernel for every tree and ray. Without, for trees without spheres: a leaf lane that
+/// needs the scalar test (an edge function exactly zero, rare) starts the ray again with the full
+/// kernel, so that the loop holds no call and GCC keeps the ray's constants in registers rather
+/// than reloading them from the stack at every node.
+template <class BoxRay, bool kFull>
 std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
   const BoxRay rd(ray);
   SphereRay sr;
@@ -590,7 +615,7 @@ std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
       const uint32_t* child;
-      int mask = enterNode(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
+      int mask = enterNode<kFull>(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
       if (mask == 0) goto pop;
       // One child entered: go on with it; two: push the farther; three or four: push all, sort
       // them farthest first by a sorting network and pop the nearest; more: insertion sort (as
@@ -643,7 +668,8 @@ std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
       // Leaf: test its packets, shrinking tMax to the nearest hit.
       VOXCONE_COUNT(leaves, 1);
       VOXCONE_COUNT(packets, leafPackets(cur));
-      closerHitsLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax, hit, found);
+      if (closerHitsLeaf<!kFull>(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax, hit, found))
+        return intersectWith<BoxRay, true>(bvh, ray);
     }
   pop:
     // The next child still in front of the closest hit.
@@ -658,7 +684,7 @@ std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
   }
 }
 
-template <class BoxRay>
+template <class BoxRay, bool kFull>
 bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
   const BoxRay rd(ray);
   SphereRay sr;
@@ -672,7 +698,7 @@ bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       VOXCONE_COUNT(nodes, 1);
       alignas(32) float tNear[kWidth];
       const uint32_t* child;
-      int mask = enterNode(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
+      int mask = enterNode<kFull>(bvh, cur, ray, rd, sr, tMin, tMax, tNear, child);
       if (mask == 0) goto pop;
       // Any hit ends the query: go on with the child most likely to hold one, push the rest.
       // Below a full Node that is the farthest: a shadow ray leaves a surface, and the boxes
@@ -690,7 +716,9 @@ bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
     {
       VOXCONE_COUNT(leaves, 1);
       VOXCONE_COUNT(packets, leafPackets(cur));
-      if (anyHitLeaf(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax)) return true;
+      const int hit = anyHitLeaf<!kFull>(bvh.leaf(leafFirst(cur)), leafPackets(cur), ray, leafRay.get(ray), tMax);
+      if (hit > 0) return true;
+      if (hit < 0) return occludedWith<BoxRay, true>(bvh, ray, tMax);
     }
   pop:
     if (sp == stack) return false;
@@ -702,12 +730,16 @@ bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
 }  // namespace
 
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
-  return paddedBoxesHold(bvh, ray) ? intersectWith<PaddedBoxRay>(bvh, ray) : intersectWith<RobustBoxRay>(bvh, ray);
+  if (paddedBoxesHold(bvh, ray))
+    return bvh.sphereCount ? intersectWith<PaddedBoxRay, true>(bvh, ray) : intersectWith<PaddedBoxRay, false>(bvh, ray);
+  return intersectWith<RobustBoxRay, true>(bvh, ray);
 }
 
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
-  return paddedBoxesHold(bvh, ray) ? occludedWith<PaddedBoxRay>(bvh, ray, tMax)
-                                   : occludedWith<RobustBoxRay>(bvh, ray, tMax);
+  if (paddedBoxesHold(bvh, ray))
+    return bvh.sphereCount ? occludedWith<PaddedBoxRay, true>(bvh, ray, tMax)
+                           : occludedWith<PaddedBoxRay, false>(bvh, ray, tMax);
+  return occludedWith<RobustBoxRay, true>(bvh, ray, tMax);
 }
 
 }  // namespace VOXCONE_ISA

@@ -164,8 +164,11 @@ struct alignas(32) RayTriLanes {
 /// `stride` floats apart; F8 needs stride 8), with the same operations in the same order as the
 /// scalar test, so both give the same t and the same answer. Lanes where an edge function is
 /// exactly zero are redone by the scalar test, which resolves them in double precision. Returns
-/// the mask of lanes hit in (tMin, tMax) and their t and barycentrics.
-template <class F>
+/// the mask of lanes hit in (tMin, tMax) and their t and barycentrics; with kDeferEdges, -1
+/// (kEdgeLanes) instead where any lane needs the scalar test, so that a caller may keep that call
+/// out of its loop.
+constexpr int kEdgeLanes = -1;
+template <class F, bool kDeferEdges = false>
 inline int intersectPackets(const float* base, int stride, const Ray& ray, const RayTriLanes& rl, float tMax,
                             float* tOut, float* b1Out, float* b2Out) {
   using R = RayTriLanes;
@@ -188,6 +191,9 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
   const F w = px[1] * py[0] - py[1] * px[0];
   const F zero = F::zero();
   const int zeroLanes = ((u == zero) | (v == zero) | (w == zero)).mask();
+  if constexpr (kDeferEdges) {
+    if (__builtin_expect(zeroLanes != 0, 0)) return kEdgeLanes;
+  }
   // Inside when all three share a sign: their sign bits agree, so (u ^ v) | (u ^ w) has a clear
   // sign bit. Exact zeros, whose sign says nothing, are the scalar test's (zeroLanes, below);
   // NaN lanes (padding) fail the ordered distance comparisons.
