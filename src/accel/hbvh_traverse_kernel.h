@@ -708,7 +708,6 @@ bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
       // whose children are mostly its leaves, laid out after it, the first: farthest there too
       // took the dragon to 1.02 (its leaves are tested in fewer numbers but out of order).
       const int first = __builtin_ctz(static_cast<unsigned>(mask));
-      if (mask & (mask - 1)) prefetchChildren(bvh, child, mask);
       const int next = (cur & kQuantBit) || !(mask & (mask - 1)) ? first : farthestChild(tNear, mask);
       cur = child[next];
       sp = pushChildren(sp, child, mask & ~(1 << next));
