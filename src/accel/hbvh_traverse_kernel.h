@@ -202,12 +202,15 @@ struct PaddedBoxRay : BoxPlanes {
 /// direction component at most 2^64 (so that 1/d is a normal float) and the largest at least
 /// 2^-40. NaN fails.
 inline bool paddedBoxesHold(const HbvhArrays& bvh, const Ray& r) {
-  const __m128 signBit = _mm_set1_ps(-0.0f);
-  const __m128 o = _mm_andnot_ps(signBit, _mm_setr_ps(r.origin.x, r.origin.y, r.origin.z, 0.0f));
-  const __m128 d = _mm_andnot_ps(signBit, _mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 0.0f));
-  const __m128 ok =
-      _mm_and_ps(_mm_cmple_ps(o, _mm_set1_ps(bvh.paddedOriginBound)), _mm_cmple_ps(d, _mm_set1_ps(0x1p64f)));
-  return _mm_movemask_ps(ok) == 0xf && (_mm_movemask_ps(_mm_cmpge_ps(d, _mm_set1_ps(0x1p-40f))) & 7) != 0;
+  static_assert(offsetof(Ray, dir) == 3 * sizeof(float) && offsetof(Ray, tMin) == 6 * sizeof(float),
+                "origin, dir and tMin lie in a row");
+  const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 od = _mm_and_ps(_mm_loadu_ps(&r.origin.x), magnitude);  // |o|, |d.x|
+  const __m128 dt = _mm_and_ps(_mm_loadu_ps(&r.dir.x), magnitude);     // |d|, |tMin|
+  const float bound = bvh.paddedOriginBound;
+  const __m128 ok = _mm_and_ps(_mm_cmple_ps(od, _mm_setr_ps(bound, bound, bound, 0x1p64f)),
+                               _mm_cmple_ps(dt, _mm_setr_ps(0x1p64f, 0x1p64f, 0x1p64f, INFINITY)));
+  return _mm_movemask_ps(ok) == 0xf && (_mm_movemask_ps(_mm_cmpge_ps(dt, _mm_set1_ps(0x1p-40f))) & 7) != 0;
 }
 
 /// The sphere test's per-ray constants (a square root and a division), made on the first sphere
