@@ -532,7 +532,7 @@ struct Hbvh::Flattener {
   const std::vector<PrimRef, HugePageAllocator<PrimRef>>& refs;
   const std::vector<Vec3>& pos;
   const std::vector<UVec3>& tris;
-  float pad;  ///< every stored child box reaches at least this far beyond its triangles (Hbvh::boxPadding)
+  float pad;  ///< every stored child box reaches at least this far beyond its triangles (HbvhStats::boxPadding)
   /// The largest magnitude of a stored plane (of a QNode: origin + q scale, as a real number),
   /// as float bits, made by fill.
   std::atomic<uint32_t> planeBound{0};
@@ -877,8 +877,8 @@ namespace {
 /// power of two), by at most u (7 P + 4 L) / |d|: the same terms, the offset's rounding
 /// u |origin - o| / |d| and in SSE two more products' (u 3 P / |d|), and the real plane
 /// origin + q scale lying within u P of the float the build checked. So, in space, the error is
-/// at most u (8 P + 5 L), plus 2^-80 for a product or sum that underflows (2^-150 each in t,
-/// times |d| <= 2^64). A box padded by twice that or more is entered by every ray that enters the
+/// at most u (8 P + 5 L), plus 2^-70 for roundings that underflow (2^-150 each in t, a QNode's
+/// scale (1/d) times q <= 255, times |d| <= 2^64: under 2^-75). A box padded by twice that or more is entered by every ray that enters the
 /// unpadded box (the entry distances come out no later and the exit ones no earlier than the
 /// exact ones; a zero direction component becomes 1e-30 and such a ray's slab on that axis
 /// extends at least pad 1e30 / |d|: the kernel requires the largest component >= 2^-40). The
@@ -888,7 +888,7 @@ namespace {
 float paddedOriginBound(double pad, double planes) {
   constexpr double u = 0x1p-24, limit = 0x1p26;
   if (!(pad > 0.0) || !(planes <= limit)) return -1.0f;
-  const double bound = (pad / 2.0 - 0x1p-80 - 8.0 * u * planes) / (5.0 * u);
+  const double bound = (pad / 2.0 - 0x1p-70 - 8.0 * u * planes) / (5.0 * u);
   if (!(bound > 0.0)) return -1.0f;
   const float f = float(std::min(bound, limit));
   return double(f) <= bound ? f : std::nextafter(f, 0.0f);
@@ -1060,7 +1060,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // test conservatively (paddedOriginBound, above): 24 times the largest coordinate here.
   m_bounds = root->box;
   const float sceneMax = maxComponent(glm::max(glm::abs(root->box.lo), glm::abs(root->box.hi)));
-  const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * 0x1p-16 + 0x1p-79) : 0.0f;
+  const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * 0x1p-16 + 0x1p-68) : 0.0f;
   Flattener flat{*this, builder.refs, positions, triangles, pad};
   uint64_t binaryNodes = 0, leaves = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);

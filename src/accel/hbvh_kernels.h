@@ -14,7 +14,6 @@ namespace voxcone {
 struct HbvhArrays {
   const Hbvh::NodeSlot* nodes;
   const Vec4* spheres;
-  size_t sphereCount;
   const unsigned char* blocks;  ///< Hbvh::m_blocks: QNodes and leaves
   /// Rays whose origin components are all at most this in magnitude take the padded box test
   /// (hbvh_traverse_kernel.h, PaddedBoxRay); -1: none.
@@ -48,20 +47,26 @@ inline HbvhCounters& hbvhCounters() {
 
 namespace sse42 {
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+std::optional<Hit> hbvhIntersectLean(const HbvhArrays& bvh, const Ray& ray);  ///< trees without spheres
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+bool hbvhOccludedLean(const HbvhArrays& bvh, const Ray& ray, float tMax);
 }  // namespace sse42
 
 #ifdef VOXCONE_AVX2_KERNELS
 namespace avx2 {
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+std::optional<Hit> hbvhIntersectLean(const HbvhArrays& bvh, const Ray& ray);  ///< trees without spheres
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+bool hbvhOccludedLean(const HbvhArrays& bvh, const Ray& ray, float tMax);
 }  // namespace avx2
 #endif
 
 #ifdef VOXCONE_AVX512_KERNELS
 namespace avx512 {
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray);
+std::optional<Hit> hbvhIntersectLean(const HbvhArrays& bvh, const Ray& ray);  ///< trees without spheres
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax);
+bool hbvhOccludedLean(const HbvhArrays& bvh, const Ray& ray, float tMax);
 }  // namespace avx512
 #endif
 

@@ -96,21 +96,28 @@ Ray fromOrigin(Ray ray) {
 
 namespace {
 
-/// One instruction set's kernels (setSimd admits only those the CPU runs).
+/// One instruction set's kernels (setSimd admits only those the CPU runs), for trees with
+/// spheres or (lean) without.
 struct Kernels {
   std::optional<Hit> (*intersect)(const HbvhArrays&, const Ray&);
   bool (*occluded)(const HbvhArrays&, const Ray&, float);
 };
 
-Kernels kernelsFor(Hbvh::Simd simd) {
+Kernels kernelsFor(Hbvh::Simd simd, bool spheres) {
   switch (simd) {
 #ifdef VOXCONE_AVX512_KERNELS
-    case Hbvh::Simd::Avx512: return {avx512::hbvhIntersect, avx512::hbvhOccluded};
+    case Hbvh::Simd::Avx512:
+      return spheres ? Kernels{avx512::hbvhIntersect, avx512::hbvhOccluded}
+                     : Kernels{avx512::hbvhIntersectLean, avx512::hbvhOccludedLean};
 #endif
 #ifdef VOXCONE_AVX2_KERNELS
-    case Hbvh::Simd::Avx2: return {avx2::hbvhIntersect, avx2::hbvhOccluded};
+    case Hbvh::Simd::Avx2:
+      return spheres ? Kernels{avx2::hbvhIntersect, avx2::hbvhOccluded}
+                     : Kernels{avx2::hbvhIntersectLean, avx2::hbvhOccludedLean};
 #endif
-    default: return {sse42::hbvhIntersect, sse42::hbvhOccluded};
+    default:
+      return spheres ? Kernels{sse42::hbvhIntersect, sse42::hbvhOccluded}
+                     : Kernels{sse42::hbvhIntersectLean, sse42::hbvhOccludedLean};
   }
 }
 
@@ -119,17 +126,17 @@ Kernels kernelsFor(Hbvh::Simd simd) {
 std::optional<Hit> Hbvh::intersect(const Ray& ray) const {
   if (m_nodes.empty()) return std::nullopt;
   if (std::signbit(ray.tMin)) return intersect(fromOrigin(ray));
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_spheres.size(),
-                          reinterpret_cast<const unsigned char*>(m_blocks.data()), m_stats.paddedOriginBound};
-  return kernelsFor(m_simd).intersect(arrays, ray);
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data()),
+                          m_stats.paddedOriginBound};
+  return kernelsFor(m_simd, !m_spheres.empty()).intersect(arrays, ray);
 }
 
 bool Hbvh::occluded(const Ray& ray, float tMax) const {
   if (m_nodes.empty()) return false;
   if (std::signbit(ray.tMin)) return occluded(fromOrigin(ray), tMax);
-  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), m_spheres.size(),
-                          reinterpret_cast<const unsigned char*>(m_blocks.data()), m_stats.paddedOriginBound};
-  return kernelsFor(m_simd).occluded(arrays, ray, tMax);
+  const HbvhArrays arrays{m_nodes.data(), m_spheres.data(), reinterpret_cast<const unsigned char*>(m_blocks.data()),
+                          m_stats.paddedOriginBound};
+  return kernelsFor(m_simd, !m_spheres.empty()).occluded(arrays, ray, tMax);
 }
 
 }  // namespace voxcone

@@ -1,14 +1,19 @@
 // HBVH traversal over 8-wide nodes, compiled once per instruction set (hbvh_kernels.h): the
 // eight child boxes of a node are tested at once, in one AVX register per plane where __AVX2__
-// is defined and in two SSE halves where not, with the same operations in the same order (the
-// AVX2 and AVX-512 TUs are built with -ffp-contract=off, and their one FMA, in a QNode's planes,
-// rounds as the SSE multiply and add do), so every kernel gives the same hits bit for bit. The
-// AVX-512 kernels are the AVX2 ones (256-bit registers) with AVX-512VL where it saves
-// instructions: box compares into mask registers, and vpcompressd to push the entered children.
-// The box test is the robust slab test (Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the
-// exit distance is widened by 1 + 2 gamma(3)); a child that keeps a bounding sphere must also be
-// entered by the ray's sphere interval. Closest-hit traversal visits the hit children nearest
-// first; shadow rays go on with the farthest below a full node (hbvhOccluded says why).
+// is defined and in two SSE halves where not. The AVX-512 kernels are the AVX2 ones (256-bit
+// registers) with AVX-512VL where it saves instructions: box compares into mask registers, and
+// vpcompressd to push the entered children.
+// Two box tests: for rays whose origin lies within the bound the build padded the boxes for
+// (paddedBoxesHold), Embree's slab distance p (1/d) - o (1/d), one FMA (a product and a sum in
+// SSE), whose rounding the padding covers (PaddedBoxRay; hbvh_build.cpp, paddedOriginBound);
+// for others the robust slab test (Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the exit
+// distance widened by 1 + 2 gamma(3); RobustBoxRay). Both are conservative, so every kernel
+// visits every leaf that holds a hit, and of hits at the same distance the smaller triangle id
+// wins (closerHitsLeaf): every kernel finds the same hit, bit for bit, as brute force does,
+// whatever order its box distances give (the triangle test runs the same operations in every
+// kernel; -ffp-contract=off). A child that keeps a bounding sphere must also be entered by the
+// ray's sphere interval. Closest-hit traversal visits the hit children nearest first; shadow
+// rays go on with the farthest below a full node (occludedWith says why).
 // Everything here lives in namespace voxcone::VOXCONE_ISA, so that the compilations never
 // share an inline function (the linker would keep one of them for all).
 
@@ -168,7 +173,7 @@ struct RobustBoxRay : BoxPlanes {
 /// The padded box test's per-ray constants: a slab distance is p (1/d) + K with K = -o (1/d),
 /// one FMA (Embree's form; a product and a sum in the SSE kernels), with no widening. Its
 /// rounding error is an absolute one, which the boxes' padding covers for the rays
-/// paddedBoxesHold admits (Hbvh::kBoxPadding says how).
+/// paddedBoxesHold admits (hbvh_build.cpp, paddedOriginBound, derives the bound).
 struct PaddedBoxRay : BoxPlanes {
   VFloat invDir[3], orgInv[3];  ///< 1/d and K
   explicit PaddedBoxRay(const Ray& r) : BoxPlanes(r) {
@@ -595,12 +600,17 @@ inline void farFirst(Entry& a, Entry& b) {
 
 namespace {
 
-/// kFull: the kernel for every tree and ray. Without, for trees without spheres: a leaf lane that
+/// BoxRay: PaddedBoxRay where paddedBoxesHold (checked here: other rays go on with the robust
+/// test), RobustBoxRay. kFull: the kernel for every tree. Without, for trees without spheres
+/// (Hbvh::intersect chooses, the hbvh*Lean entry points): a leaf lane that
 /// needs the scalar test (an edge function exactly zero, rare) starts the ray again with the full
 /// kernel, so that the loop holds no call and GCC keeps the ray's constants in registers rather
 /// than reloading them from the stack at every node.
 template <class BoxRay, bool kFull>
 std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
+  if constexpr (std::is_same_v<BoxRay, PaddedBoxRay>) {
+    if (__builtin_expect(!paddedBoxesHold(bvh, ray), 0)) return intersectWith<RobustBoxRay, true>(bvh, ray);
+  }
   const BoxRay rd(ray);
   SphereRay sr;
   LeafRay leafRay;
@@ -689,6 +699,9 @@ std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
 
 template <class BoxRay, bool kFull>
 bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
+  if constexpr (std::is_same_v<BoxRay, PaddedBoxRay>) {
+    if (__builtin_expect(!paddedBoxesHold(bvh, ray), 0)) return occludedWith<RobustBoxRay, true>(bvh, ray, tMax);
+  }
   const BoxRay rd(ray);
   SphereRay sr;
   LeafRay leafRay;
@@ -732,16 +745,16 @@ bool occludedWith(const HbvhArrays& bvh, const Ray& ray, float tMax) {
 }  // namespace
 
 std::optional<Hit> hbvhIntersect(const HbvhArrays& bvh, const Ray& ray) {
-  if (paddedBoxesHold(bvh, ray))
-    return bvh.sphereCount ? intersectWith<PaddedBoxRay, true>(bvh, ray) : intersectWith<PaddedBoxRay, false>(bvh, ray);
-  return intersectWith<RobustBoxRay, true>(bvh, ray);
+  return intersectWith<PaddedBoxRay, true>(bvh, ray);
 }
-
+std::optional<Hit> hbvhIntersectLean(const HbvhArrays& bvh, const Ray& ray) {
+  return intersectWith<PaddedBoxRay, false>(bvh, ray);
+}
 bool hbvhOccluded(const HbvhArrays& bvh, const Ray& ray, float tMax) {
-  if (paddedBoxesHold(bvh, ray))
-    return bvh.sphereCount ? occludedWith<PaddedBoxRay, true>(bvh, ray, tMax)
-                           : occludedWith<PaddedBoxRay, false>(bvh, ray, tMax);
-  return occludedWith<RobustBoxRay, true>(bvh, ray, tMax);
+  return occludedWith<PaddedBoxRay, true>(bvh, ray, tMax);
+}
+bool hbvhOccludedLean(const HbvhArrays& bvh, const Ray& ray, float tMax) {
+  return occludedWith<PaddedBoxRay, false>(bvh, ray, tMax);
 }
 
 }  // namespace VOXCONE_ISA

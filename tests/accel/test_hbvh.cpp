@@ -515,7 +515,7 @@ TEST(Hbvh, PaddedAndRobustBoxTestsFindTheBruteForceHits) {
       Hbvh bvh(s.pos, s.tris, settings);
       const float bound = bvh.stats().paddedOriginBound;
       const float largest = maxComponent(glm::max(glm::abs(b.lo), glm::abs(b.hi)));
-      EXPECT_EQ(bvh.stats().boxPadding, float(largest * 0x1p-16 + 0x1p-79));
+      EXPECT_EQ(bvh.stats().boxPadding, float(largest * 0x1p-16 + 0x1p-68));
       EXPECT_GT(bound, 23.0f * largest);  // 24 times the largest coordinate
       EXPECT_LT(bound, 24.0f * largest);
       for (Hbvh::Simd simd : kernels) {
@@ -685,7 +685,7 @@ TEST(Hbvh, AvxKernelsShareNoInlineCodeWithTheBaseline) {
       ++defined;
       EXPECT_NE(line.find(ns), std::string::npos) << object << ": " << line;
     }
-    EXPECT_GE(defined, 2) << object;  // hbvhIntersect and hbvhOccluded
+    EXPECT_GE(defined, 4) << object;  // hbvhIntersect, hbvhOccluded and their Lean forms
   }
 }
 

@@ -200,9 +200,9 @@ public:
   const HbvhBuildSettings& settings() const { return m_settings; }
 
   /// The traversal kernels: SSE 4.2 (any x86-64 this project targets), AVX2 (8 boxes in one
-  /// register) or AVX-512 (AVX2's with mask registers and compress). All run the same
-  /// operations in the same order, so they find the same hits, bit for bit; the wider are only
-  /// faster.
+  /// register) or AVX-512 (AVX2's with mask registers and compress). All find the same hits,
+  /// bit for bit (the triangle test runs the same operations everywhere, the box tests are
+  /// conservative and ties go to the smaller triangle id); the wider are only faster.
   enum class Simd { Sse42, Avx2, Avx512 };
   /// The best kernel this CPU runs; VOXCONE_SIMD=sse4.2 (or avx2) in the environment forces a
   /// narrower one.
