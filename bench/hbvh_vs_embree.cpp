@@ -522,9 +522,10 @@ int run(const Options& opt) {
               (unsigned long long)hs.nodes, (unsigned long long)hs.quantizedNodes, (unsigned long long)hs.leaves,
               (unsigned long long)hs.sphereNodes,
               hs.avgLeafSize, hs.maxDepth, hs.sahCost);
-  std::printf("HBVH boxes padded by %.3g (2^-16 of the largest coordinate, %.3g); origins within %.3g take the one-FMA "
-              "box test\n",
-              double(hs.boxPadding), double(maxComponent(glm::max(glm::abs(bvh->bounds().lo), glm::abs(bvh->bounds().hi)))),
+  std::printf("HBVH boxes padded by %.3g (%g of the largest coordinate, %.3g); origins within %.3g take the "
+              "one-FMA box test\n",
+              double(hs.boxPadding), Hbvh::kBoxPaddingRelative,
+              double(maxComponent(glm::max(glm::abs(bvh->bounds().lo), glm::abs(bvh->bounds().hi)))),
               double(hs.paddedOriginBound));
   const HbvhLayout layout = bvh->layout();
   std::printf("HBVH layout: %llu of %llu leaves below QNodes follow them; distinct vertices a leaf triangle %.2f "

@@ -882,8 +882,8 @@ namespace {
 /// unpadded box (the entry distances come out no later and the exit ones no earlier than the
 /// exact ones; a zero direction component becomes 1e-30 and such a ray's slab on that axis
 /// extends at least pad 1e30 / |d|: the kernel requires the largest component >= 2^-40). The
-/// factor two leaves room for the watertight test's own rounding, so that the AVX and SSE
-/// kernels, which round the box distances differently, visit every leaf that holds a hit.
+/// factor two leaves room for the watertight test's own rounding (a hit's t may lie a little
+/// before the exact one; tested, not proven: Hbvh.PaddedAndRobustBoxTestsFindTheBruteForceHits).
 /// Products stay finite (1/d <= 1e30, P and L <= 2^26).
 float paddedOriginBound(double pad, double planes) {
   constexpr double u = 0x1p-24, limit = 0x1p26;
@@ -1054,13 +1054,14 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   BuildNode* root = builder.arena.make();
   builder.build(builder.rootRange(), 0, root);
 
-  // Collapse to kWidth children per node and flatten depth first.
-  // Every stored child box is padded outwards by 2^-16 of the largest coordinate magnitude, so that
-  // the rays whose origin lies within paddedOriginBound of the origin take Embree's one-FMA box
-  // test conservatively (paddedOriginBound, above): 24 times the largest coordinate here.
+  // Every stored child box is padded outwards by kBoxPaddingRelative of the largest coordinate
+  // magnitude, so that rays whose origin components lie within paddedOriginBound take Embree's
+  // one-FMA box test conservatively (paddedOriginBound, above: 4.8 times that coordinate).
   m_bounds = root->box;
   const float sceneMax = maxComponent(glm::max(glm::abs(root->box.lo), glm::abs(root->box.hi)));
-  const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * 0x1p-16 + 0x1p-68) : 0.0f;
+  const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * kBoxPaddingRelative + 0x1p-68) : 0.0f;
+
+  // Collapse to kWidth children per node and flatten depth first.
   Flattener flat{*this, builder.refs, positions, triangles, pad};
   uint64_t binaryNodes = 0, leaves = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);

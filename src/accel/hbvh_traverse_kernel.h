@@ -8,10 +8,10 @@
 // SSE), whose rounding the padding covers (PaddedBoxRay; hbvh_build.cpp, paddedOriginBound);
 // for others the robust slab test (Ize 2013, "Robust BVH Ray Traversal", JCGT 2(2): the exit
 // distance widened by 1 + 2 gamma(3); RobustBoxRay). Both are conservative, so every kernel
-// visits every leaf that holds a hit, and of hits at the same distance the smaller triangle id
+// visits the leaves that hold the hits, and of hits at the same distance the smaller triangle id
 // wins (closerHitsLeaf): every kernel finds the same hit, bit for bit, as brute force does,
 // whatever order its box distances give (the triangle test runs the same operations in every
-// kernel; -ffp-contract=off). A child that keeps a bounding sphere must also be entered by the
+// kernel; -ffp-contract=off; tested against brute force, Hbvh.PaddedAndRobustBoxTests...). A child that keeps a bounding sphere must also be entered by the
 // ray's sphere interval. Closest-hit traversal visits the hit children nearest first; shadow
 // rays go on with the farthest below a full node (occludedWith says why).
 // Everything here lives in namespace voxcone::VOXCONE_ISA, so that the compilations never

@@ -515,9 +515,9 @@ TEST(Hbvh, PaddedAndRobustBoxTestsFindTheBruteForceHits) {
       Hbvh bvh(s.pos, s.tris, settings);
       const float bound = bvh.stats().paddedOriginBound;
       const float largest = maxComponent(glm::max(glm::abs(b.lo), glm::abs(b.hi)));
-      EXPECT_EQ(bvh.stats().boxPadding, float(largest * 0x1p-16 + 0x1p-68));
-      EXPECT_GT(bound, 23.0f * largest);  // 24 times the largest coordinate
-      EXPECT_LT(bound, 24.0f * largest);
+      EXPECT_EQ(bvh.stats().boxPadding, float(largest * Hbvh::kBoxPaddingRelative + 0x1p-68));
+      EXPECT_GT(bound, 4.7f * largest);  // 4.8 times the largest coordinate
+      EXPECT_LT(bound, 4.8f * largest);
       for (Hbvh::Simd simd : kernels) {
         bvh.setSimd(simd);
         Rng rng(37, 0);
