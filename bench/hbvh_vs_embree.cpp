@@ -32,6 +32,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -522,9 +523,9 @@ int run(const Options& opt) {
               (unsigned long long)hs.nodes, (unsigned long long)hs.quantizedNodes, (unsigned long long)hs.leaves,
               (unsigned long long)hs.sphereNodes,
               hs.avgLeafSize, hs.maxDepth, hs.sahCost);
-  std::printf("HBVH boxes padded by %.3g (%g of the largest coordinate, %.3g); origins within %.3g take the "
+  std::printf("HBVH boxes padded by %.3g (2^%d of the largest coordinate, %.3g); origins within %.3g take the "
               "one-FMA box test\n",
-              double(hs.boxPadding), Hbvh::kBoxPaddingRelative,
+              double(hs.boxPadding), int(std::lround(std::log2(Hbvh::kBoxPaddingRelative))),
               double(maxComponent(glm::max(glm::abs(bvh->bounds().lo), glm::abs(bvh->bounds().hi)))),
               double(hs.paddedOriginBound));
   const HbvhLayout layout = bvh->layout();
