@@ -878,10 +878,11 @@ namespace {
 /// u |origin - o| / |d| and in SSE two more products' (u 3 P / |d|), and the real plane
 /// origin + q scale lying within u P of the float the build checked. So, in space, the error is
 /// at most u (8 P + 5 L), plus 2^-70 for roundings that underflow (2^-150 each in t, a QNode's
-/// scale (1/d) times q <= 255, times |d| <= 2^64: under 2^-75). A box padded by twice that or more is entered by every ray that enters the
-/// unpadded box (the entry distances come out no later and the exit ones no earlier than the
-/// exact ones; a zero direction component becomes 1e-30 and such a ray's slab on that axis
-/// extends at least pad 1e30 / |d|: the kernel requires the largest component >= 2^-40). The
+/// scale (1/d) times q <= 255, times |d| <= 2^64: under 2^-75). A box padded by twice that or
+/// more is entered by every ray that enters the unpadded box (the entry distances come out no
+/// later and the exit ones no earlier than the exact ones; a zero direction component becomes
+/// 1e-30 and such a ray's slab on that axis extends at least pad 1e30 / |d|: the kernel requires
+/// the largest component >= 2^-40). The
 /// factor two leaves room for the watertight test's own rounding (a hit's t may lie a little
 /// before the exact one; tested, not proven: Hbvh.PaddedAndRobustBoxTestsFindTheBruteForceHits).
 /// Products stay finite (1/d <= 1e30, P and L <= 2^26).
