@@ -882,9 +882,9 @@ namespace {
 /// more is entered by every ray that enters the unpadded box (the entry distances come out no
 /// later and the exit ones no earlier than the exact ones; a zero direction component becomes
 /// 1e-30 and such a ray's slab on that axis extends at least pad 1e30 / |d|: the kernel requires
-/// the largest component >= 2^-40). The
-/// factor two leaves room for the watertight test's own rounding (a hit's t may lie a little
-/// before the exact one; tested, not proven: Hbvh.PaddedAndRobustBoxTestsFindTheBruteForceHits).
+/// the largest component >= 2^-40). The factor two leaves room for the watertight test's own
+/// rounding (a hit's t may lie a little before the exact one; tested, not proven:
+/// Hbvh.PaddedAndRobustBoxTestsFindTheBruteForceHits).
 /// Products stay finite (1/d <= 1e30, P and L <= 2^26).
 float paddedOriginBound(double pad, double planes) {
   constexpr double u = 0x1p-24, limit = 0x1p26;

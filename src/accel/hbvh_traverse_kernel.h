@@ -11,9 +11,10 @@
 // visits the leaves that hold the hits, and of hits at the same distance the smaller triangle id
 // wins (closerHitsLeaf): every kernel finds the same hit, bit for bit, as brute force does,
 // whatever order its box distances give (the triangle test runs the same operations in every
-// kernel; -ffp-contract=off; tested against brute force, Hbvh.PaddedAndRobustBoxTests...). A child that keeps a bounding sphere must also be entered by the
-// ray's sphere interval. Closest-hit traversal visits the hit children nearest first; shadow
-// rays go on with the farthest below a full node (occludedWith says why).
+// kernel, -ffp-contract=off; tested: Hbvh.PaddedAndRobustBoxTestsFindTheBruteForceHits).
+// A child that keeps a bounding sphere must also be entered by the ray's sphere interval.
+// Closest-hit traversal visits the hit children nearest first; shadow rays go on with the
+// farthest below a full node (occludedWith says why).
 // Everything here lives in namespace voxcone::VOXCONE_ISA, so that the compilations never
 // share an inline function (the linker would keep one of them for all).
 
@@ -53,9 +54,7 @@ inline VFloat load(const float* p) { return _mm256_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm256_store_ps(p, a); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm256_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm256_mul_ps(a, b); }
-/// a b + c, rounded once: where a b is exact, the float of add(mul(a, b), c).
-inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm256_fmadd_ps(a, b, c); }
-/// a b + c: rounded once (FMA) here, twice in the SSE kernels.
+/// a b + c: rounded once (FMA) here, twice in the SSE kernels (the same float where a b is exact).
 inline VFloat mulAdd(VFloat a, VFloat b, VFloat c) { return _mm256_fmadd_ps(a, b, c); }
 /// Eight bytes from p as floats.
 inline VFloat loadBytes(const uint8_t* p) {
@@ -82,7 +81,6 @@ inline VFloat load(const float* p) { return _mm_load_ps(p); }
 inline void store(float* p, VFloat a) { _mm_store_ps(p, a); }
 inline VFloat sub(VFloat a, VFloat b) { return _mm_sub_ps(a, b); }
 inline VFloat mul(VFloat a, VFloat b) { return _mm_mul_ps(a, b); }
-inline VFloat mulAddExactProduct(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
 inline VFloat mulAdd(VFloat a, VFloat b, VFloat c) { return _mm_add_ps(_mm_mul_ps(a, b), c); }
 /// Four bytes from p as floats.
 inline VFloat loadBytes(const uint8_t* p) {
@@ -166,8 +164,10 @@ struct RobustBoxRay : BoxPlanes {
     VFloat scale, origin;
   };
   QAxis qAxis(const QNode& n, int a) const { return {broadcast(n.scale[a]), broadcast(n.origin[a])}; }
-  VFloat nearQ(VFloat q, const QAxis& x, int a) const { return nearT(mulAddExactProduct(q, x.scale, x.origin), a); }
-  VFloat farQ(VFloat q, const QAxis& x, int a) const { return farT(mulAddExactProduct(q, x.scale, x.origin), a); }
+  VFloat nearQ(VFloat q, const QAxis& x, int a) const { return nearT(plane(q, x), a); }
+  VFloat farQ(VFloat q, const QAxis& x, int a) const { return farT(plane(q, x), a); }
+  /// q scale is exact (a power of two), so every kernel rounds this once, as the build did.
+  static VFloat plane(VFloat q, const QAxis& x) { return mulAdd(q, x.scale, x.origin); }
 };
 
 /// The padded box test's per-ray constants: a slab distance is p (1/d) + K with K = -o (1/d),
@@ -188,7 +188,7 @@ struct PaddedBoxRay : BoxPlanes {
     }
   }
   VFloat nearT(VFloat plane, int a) const { return mulAdd(plane, invDir[a], orgInv[a]); }
-  VFloat farT(VFloat plane, int a) const { return mulAdd(plane, invDir[a], orgInv[a]); }
+  VFloat farT(VFloat plane, int a) const { return nearT(plane, a); }  // no widening
   /// A QNode's planes on axis a: (origin + q scale) (1/d) + K = q (scale (1/d)) + (origin (1/d)
   /// + K), with scale (1/d) exact (scale is a power of two), so a plane costs one FMA, as a
   /// full node's.
@@ -199,7 +199,7 @@ struct PaddedBoxRay : BoxPlanes {
     return {mul(broadcast(n.scale[a]), invDir[a]), mulAdd(broadcast(n.origin[a]), invDir[a], orgInv[a])};
   }
   VFloat nearQ(VFloat q, const QAxis& x, int) const { return mulAdd(q, x.scaleInv, x.offset); }
-  VFloat farQ(VFloat q, const QAxis& x, int) const { return mulAdd(q, x.scaleInv, x.offset); }
+  VFloat farQ(VFloat q, const QAxis& x, int a) const { return nearQ(q, x, a); }
 };
 
 /// Whether the padded test is conservative for this ray in this tree (hbvh_build.cpp,
@@ -602,10 +602,10 @@ namespace {
 
 /// BoxRay: PaddedBoxRay where paddedBoxesHold (checked here: other rays go on with the robust
 /// test), RobustBoxRay. kFull: the kernel for every tree. Without, for trees without spheres
-/// (Hbvh::intersect chooses, the hbvh*Lean entry points): a leaf lane that
-/// needs the scalar test (an edge function exactly zero, rare) starts the ray again with the full
-/// kernel, so that the loop holds no call and GCC keeps the ray's constants in registers rather
-/// than reloading them from the stack at every node.
+/// (Hbvh::intersect chooses, the hbvh*Lean entry points): a leaf lane that needs the scalar test
+/// (an edge function exactly zero, rare) starts the ray again with the full kernel, so that the
+/// loop holds no call and GCC keeps the ray's constants in registers rather than reloading them
+/// from the stack at every node.
 template <class BoxRay, bool kFull>
 std::optional<Hit> intersectWith(const HbvhArrays& bvh, const Ray& ray) {
   if constexpr (std::is_same_v<BoxRay, PaddedBoxRay>) {
