@@ -232,11 +232,24 @@ struct BinMap {
   }
 };
 
+/// The build's references, in memory that Hbvh::build hands on to the tree's block store once
+/// the binary tree is built (it says why).
+struct PrimRefs {
+  PrimRef* first = nullptr;
+  size_t count = 0;
+  size_t size() const { return count; }
+  bool empty() const { return count == 0; }
+  PrimRef* data() const { return first; }
+  PrimRef* begin() const { return first; }
+  PrimRef* end() const { return first + count; }
+  PrimRef& operator[](size_t i) const { return first[i]; }
+};
+
 class Builder {
 public:
   Builder(const HbvhBuildSettings& s, Progress* p) : m_s(s), m_progress(p) {}
 
-  std::vector<PrimRef, HugePageAllocator<PrimRef>> refs;
+  PrimRefs refs;
   /// Build nodes (stable addresses; freed together: 337k nodes for the dragon were 337k
   /// allocations and a recursive free).
   Arena<BuildNode> arena;
@@ -529,7 +542,7 @@ private:
 /// (`collapse`); nothing else is allocated.
 struct Hbvh::Flattener {
   Hbvh& bvh;
-  const std::vector<PrimRef, HugePageAllocator<PrimRef>>& refs;
+  const std::vector<uint32_t>& ids;  ///< the triangle of each reference, in the binary tree's order
   const std::vector<Vec3>& pos;
   const std::vector<UVec3>& tris;
   float pad;  ///< every stored child box reaches at least this far beyond its triangles (HbvhStats::boxPadding)
@@ -563,15 +576,15 @@ struct Hbvh::Flattener {
     return k;
   }
 
-  /// Write the leaf of triangles ids[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
+  /// Write the leaf of triangles leafIds[0..count) from `out` (Hbvh::LeafUnit's layout): pairs of
   /// packets eight lanes to a row, an odd last packet four; NaN vertices and id 0 in unused lanes
   /// (read by closerHitsLeaf / anyHitLeaf in hbvh_traverse_kernel.h).
-  void packLeaf(const uint32_t* ids, uint32_t count, float* out) const {
+  void packLeaf(const uint32_t* leafIds, uint32_t count, float* out) const {
     const uint32_t packets = (count + 3u) / 4u;
     const auto put = [&](float* block, int stride, uint32_t first) {
       for (int lane = 0; lane < stride; ++lane) {
         const bool used = first + lane < count;
-        const uint32_t id = used ? ids[first + lane] : 0u;
+        const uint32_t id = used ? leafIds[first + lane] : 0u;
         std::memcpy(block + kIdRow * stride + lane, &id, sizeof id);
         for (int vtx = 0; vtx < 3; ++vtx) {
           const Vec3 v = used ? pos[tris[id][vtx]] : Vec3(std::numeric_limits<float>::quiet_NaN());
@@ -612,7 +625,7 @@ struct Hbvh::Flattener {
   /// stays finite in powers of two.
   bool quantized(const BuildNode& n) const {
     const HbvhBuildSettings& s = bvh.m_settings;
-    return refs.size() >= size_t(s.quantizeMinTriangles) && n.count <= uint32_t(s.quantizeBelow) &&
+    return ids.size() >= size_t(s.quantizeMinTriangles) && n.count <= uint32_t(s.quantizeBelow) &&
            maxComponent(n.box.diagonal()) < 0x1p100f;
   }
 
@@ -791,10 +804,8 @@ struct Hbvh::Flattener {
     auto kid = [&](int i) {
       const BuildNode& b = *kids[i];
       if (b.leaf()) {
-        uint32_t ids[64];  // maxLeafSize <= 64
-        for (uint32_t j = 0; j < b.count; ++j) ids[j] = refs[b.first + j].id();
         unsigned char* at = reinterpret_cast<unsigned char*>(bvh.m_blocks.data()) + size_t(starts[i][2]) * kUnitBytes;
-        packLeaf(ids, b.count, reinterpret_cast<float*>(at));
+        packLeaf(ids.data() + b.first, b.count, reinterpret_cast<float*>(at));
       } else {
         fill(b, starts[i][0], starts[i][1], starts[i][2], quantized(b));
       }
@@ -809,7 +820,7 @@ struct Hbvh::Flattener {
     const Vec3 c = n.box.center();
     float r2 = 0.0f;
     for (uint32_t i = n.first; i < n.first + n.count; ++i) {
-      const UVec3& t = tris[refs[i].id()];
+      const UVec3& t = tris[ids[i]];
       for (int k = 0; k < 3; ++k) r2 = std::max(r2, glm::dot(pos[t[k]] - c, pos[t[k]] - c));
     }
     return std::sqrt(r2);
@@ -1023,8 +1034,20 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // References for every triangle with finite, indexable vertices.
   // In parallel into every slot; a triangle that cannot be bounded leaves its slot invalid
   // (PrimRef::kInvalid), and the slots are compacted in order only when there is one.
+  // The references lie in the memory that becomes the tree's block store (m_blocks) once the
+  // binary tree is built and their triangle ids are copied out: on these VMs memory a process
+  // touches for the first time costs about 2.5 ms a MB to fault in (README, Benchmarks), and the
+  // knot's 320 MB of references were a fifth of its build. The store is reserved for 64 bytes a
+  // triangle (the dragon's tree takes 51, the knot's 46); a tree that needs more gets fresh
+  // memory.
+  decltype(m_blocks) storage;
+  const size_t refLines = (triangles.size() * sizeof(PrimRef) + sizeof(BlockLine) - 1) / sizeof(BlockLine);
+  storage.reserve(std::max(refLines, triangles.size()));  // a line (64 bytes) a triangle
+  storage.resize(refLines);
+  static_assert(sizeof(BlockLine) % sizeof(PrimRef) == 0 && alignof(BlockLine) >= alignof(PrimRef),
+                "references tile the block store's lines");
   auto& refs = builder.refs;
-  refs.resize(triangles.size());
+  refs = {reinterpret_cast<PrimRef*>(storage.data()), triangles.size()};  // each made in place below
   std::atomic<bool> anyInvalid{false};
   tbb::parallel_for(tbb::blocked_range<uint32_t>(0, uint32_t(triangles.size()), 16384),
                     [&](const tbb::blocked_range<uint32_t>& r) {
@@ -1032,13 +1055,13 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
                         Bounds3 box;
                         const bool ok = triangleBounds(positions, triangles[i], box);
                         if (!ok) anyInvalid = true;
-                        refs[i] = PrimRef(box, ok ? i | PrimRef::kIdTag : PrimRef::kInvalid);
+                        new (&refs[i]) PrimRef(box, ok ? i | PrimRef::kIdTag : PrimRef::kInvalid);
                       }
                     });
   if (anyInvalid)
-    refs.erase(std::remove_if(refs.begin(), refs.end(),
-                              [](const PrimRef& r) { return r.tagged() == PrimRef::kInvalid; }),
-               refs.end());
+    refs.count = size_t(std::remove_if(refs.begin(), refs.end(),
+                                       [](const PrimRef& r) { return r.tagged() == PrimRef::kInvalid; }) -
+                        refs.begin());
   if (progress) progress->start("hbvh", builder.refs.size());
   m_nodes.clear();
   m_spheres.clear();
@@ -1063,7 +1086,12 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   const float pad = sceneMax <= 0x1p26f ? float(double(sceneMax) * kBoxPaddingRelative + 0x1p-68) : 0.0f;
 
   // Collapse to kWidth children per node and flatten depth first.
-  Flattener flat{*this, builder.refs, positions, triangles, pad};
+  std::vector<uint32_t> ids(refs.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, refs.size(), 16384), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) ids[i] = refs[i].id();
+  });
+  refs = {};  // from here on the memory is the block store's
+  Flattener flat{*this, ids, positions, triangles, pad};
   uint64_t binaryNodes = 0, leaves = 0;
   m_stats.sahCost = flat.sah(*root, std::max(root->area, 1e-30f), binaryNodes, leaves);
   // A single leaf still needs a node to hold its box: measure() makes it the root's only kid.
@@ -1073,14 +1101,17 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   if (root->wideUnits > kSlotMask) throw SettingsError("HBVH: leaf data over 4 GiB (leaf references hold 2^27 units)");
   m_nodes.resize(root->wideNodes);
   m_spheres.resize(root->wideSpheres);
-  m_blocks.resize(root->wideUnits / Flattener::kLineUnits);
+  const size_t lines = root->wideUnits / Flattener::kLineUnits;
+  if (lines <= storage.capacity()) m_blocks = std::move(storage);
+  else storage = decltype(m_blocks)();
+  m_blocks.resize(lines);
   flat.fill(*root, 0, 0, 0, false);
   m_stats.quantizedNodes = qnodes;
   m_stats.nodes = m_nodes.size() / 2 + qnodes;  // two slots a Node
   m_stats.leaves = leaves;
   m_stats.binaryNodes = binaryNodes;
   m_stats.sphereNodes = m_spheres.size();
-  m_stats.avgLeafSize = m_stats.leaves ? double(builder.refs.size()) / double(m_stats.leaves) : 0.0;
+  m_stats.avgLeafSize = m_stats.leaves ? double(ids.size()) / double(m_stats.leaves) : 0.0;
   m_stats.bytes =
       m_nodes.size() * sizeof(NodeSlot) + m_spheres.size() * sizeof(Vec4) + m_blocks.size() * sizeof(BlockLine);
   float planes;
