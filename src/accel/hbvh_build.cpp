@@ -1042,7 +1042,11 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // memory.
   decltype(m_blocks) storage;
   const size_t refLines = (triangles.size() * sizeof(PrimRef) + sizeof(BlockLine) - 1) / sizeof(BlockLine);
-  storage.reserve(std::max(refLines, triangles.size()));  // a line (64 bytes) a triangle
+  try {
+    storage.reserve(std::max(refLines, triangles.size()));  // a line (64 bytes) a triangle
+  } catch (const std::bad_alloc&) {
+    storage.reserve(refLines);  // address space refused (strict overcommit): the references alone
+  }
   storage.resize(refLines);
   static_assert(sizeof(BlockLine) % sizeof(PrimRef) == 0 && alignof(BlockLine) >= alignof(PrimRef),
                 "references tile the block store's lines");
