@@ -95,18 +95,25 @@ inline int lessEqualMask(VFloat a, VFloat b) {
 }
 #endif
 
-/// Byte offsets in a Node of the entry (near) and exit (far) planes on each axis, for each
-/// combination of the direction's signs (bit a: dir[a] < 0 swaps lo and hi).
+/// Byte offsets in a Node (and, a quarter of them, in a QNode) of the entry (near) and exit
+/// (far) planes on each axis, for each combination of the direction's signs (bit a: dir[a] < 0
+/// swaps lo and hi).
 struct BoxPlaneOffsets {
-  int64_t near[8][3], far[8][3];
-  constexpr BoxPlaneOffsets() : near(), far() {
+  struct Row {
+    int64_t near[3], far[3];
+    int64_t nearQ[3], farQ[3];  ///< a QNode's, a quarter of those (enterBoxesQ)
+  };
+  Row rows[8];
+  constexpr BoxPlaneOffsets() : rows() {
     for (int negative = 0; negative < 8; ++negative)
       for (int a = 0; a < 3; ++a) {
         const int64_t lo = offsetof(Node, lo) + a * sizeof(float[kWidth]);
         const int64_t hi = offsetof(Node, hi) + a * sizeof(float[kWidth]);
         const bool swap = (negative >> a) & 1;
-        near[negative][a] = swap ? hi : lo;
-        far[negative][a] = swap ? lo : hi;
+        rows[negative].near[a] = swap ? hi : lo;
+        rows[negative].far[a] = swap ? lo : hi;
+        rows[negative].nearQ[a] = rows[negative].near[a] / 4;
+        rows[negative].farQ[a] = rows[negative].far[a] / 4;
       }
   }
 };
@@ -124,16 +131,22 @@ inline __m128 boxReciprocal(const Ray& r) {
   return _mm_div_ps(_mm_set1_ps(1.0f), safe);
 }
 
-/// The byte offsets in a Node of the entry and exit planes on each axis (lo or hi by the sign
-/// of the direction), so that the box test has no branch: copied from kBoxPlaneOffsets (read
-/// through a pointer, each node visit had three more instructions).
+/// The byte offsets in a Node (and a QNode) of the entry and exit planes on each axis (lo or hi
+/// by the sign of the direction), so that the box test has no branch: kBoxPlaneOffsets' row for
+/// the ray, read through a pointer. Copied into the ray (as they were), GCC kept all twelve on
+/// the stack anyway, and making them was about 40 of a ray's instructions (callgrind, dragon
+/// primary rays, AVX2: 909 -> 869 a ray through the pointer, 932 copying the row's twelve).
+/// Measured (bench/hbvh_vs_embree, dragon, 7 alternating runs, medians of two sets of 3 and 4,
+/// copied / pointer): primary 1.005 / 1.055 and 1.098 / 1.130, incoherent 1.150 / 1.132 and
+/// 1.170 / 1.142 (a node's offsets now a load further from its planes), secondary 1.102 / 1.079
+/// and 1.12 / 1.12, shadow 1.099 / 1.116 and 1.099 / 1.116; 10M knot incoherent (2 runs) 1.059-
+/// 1.068 / 1.056-1.060. The primary rays, in cache, had the thinnest margin.
 struct BoxPlanes {
-  int64_t nearOffset[3], farOffset[3];
+  const BoxPlaneOffsets::Row* planes;
   explicit BoxPlanes(const Ray& r) {
     // The sign bits of the direction (those of boxReciprocal's, which keeps a zero's sign).
     const int negative = _mm_movemask_ps(_mm_setr_ps(r.dir.x, r.dir.y, r.dir.z, 0.0f));
-    std::memcpy(nearOffset, kBoxPlaneOffsets.near[negative], sizeof nearOffset);
-    std::memcpy(farOffset, kBoxPlaneOffsets.far[negative], sizeof farOffset);
+    planes = &kBoxPlaneOffsets.rows[negative];
   }
 };
 
@@ -251,8 +264,8 @@ template <class BoxRay>
 inline int enterBoxes(const Node& n, int first, const BoxRay& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const char* base = reinterpret_cast<const char*>(&n) + first * sizeof(float);
   const auto plane = [&](int64_t offset) { return load(reinterpret_cast<const float*>(base + offset)); };
-  return slabTest([&](int a) { return rd.nearT(plane(rd.nearOffset[a]), a); },
-                  [&](int a) { return rd.farT(plane(rd.farOffset[a]), a); }, tMin, tMax, tNearOut + first);
+  return slabTest([&](int a) { return rd.nearT(plane(rd.planes->near[a]), a); },
+                  [&](int a) { return rd.farT(plane(rd.planes->far[a]), a); }, tMin, tMax, tNearOut + first);
 }
 
 /// enterBoxes for a QNode. A plane's bytes lie at a quarter of its floats' offset in a Node
@@ -261,8 +274,8 @@ template <class BoxRay>
 inline int enterBoxesQ(const QNode& n, int first, const BoxRay& rd, VFloat tMin, VFloat tMax, float* tNearOut) {
   const uint8_t* base = &n.lo[0][0] + first;
   const typename BoxRay::QAxis axis[3] = {rd.qAxis(n, 0), rd.qAxis(n, 1), rd.qAxis(n, 2)};
-  return slabTest([&](int a) { return rd.nearQ(loadBytes(base + (rd.nearOffset[a] >> 2)), axis[a], a); },
-                  [&](int a) { return rd.farQ(loadBytes(base + (rd.farOffset[a] >> 2)), axis[a], a); }, tMin, tMax,
+  return slabTest([&](int a) { return rd.nearQ(loadBytes(base + rd.planes->nearQ[a]), axis[a], a); },
+                  [&](int a) { return rd.farQ(loadBytes(base + rd.planes->farQ[a]), axis[a], a); }, tMin, tMax,
                   tNearOut + first);
 }
 static_assert(offsetof(Node, lo) == 0 && offsetof(Node, hi) == 4 * (offsetof(QNode, hi) - offsetof(QNode, lo)),
