@@ -104,21 +104,20 @@ struct Kernels {
 };
 
 Kernels kernelsFor(Hbvh::Simd simd, bool spheres) {
+// One namespace's pair: the full kernels where the tree keeps spheres, the lean ones where not.
+#define VOXCONE_KERNELS_OF(isa)                             \
+  (spheres ? Kernels{isa::hbvhIntersect, isa::hbvhOccluded} \
+           : Kernels{isa::hbvhIntersectLean, isa::hbvhOccludedLean})
   switch (simd) {
 #ifdef VOXCONE_AVX512_KERNELS
-    case Hbvh::Simd::Avx512:
-      return spheres ? Kernels{avx512::hbvhIntersect, avx512::hbvhOccluded}
-                     : Kernels{avx512::hbvhIntersectLean, avx512::hbvhOccludedLean};
+    case Hbvh::Simd::Avx512: return VOXCONE_KERNELS_OF(avx512);
 #endif
 #ifdef VOXCONE_AVX2_KERNELS
-    case Hbvh::Simd::Avx2:
-      return spheres ? Kernels{avx2::hbvhIntersect, avx2::hbvhOccluded}
-                     : Kernels{avx2::hbvhIntersectLean, avx2::hbvhOccludedLean};
+    case Hbvh::Simd::Avx2: return VOXCONE_KERNELS_OF(avx2);
 #endif
-    default:
-      return spheres ? Kernels{sse42::hbvhIntersect, sse42::hbvhOccluded}
-                     : Kernels{sse42::hbvhIntersectLean, sse42::hbvhOccludedLean};
+    default: return VOXCONE_KERNELS_OF(sse42);
   }
+#undef VOXCONE_KERNELS_OF
 }
 
 }  // namespace
