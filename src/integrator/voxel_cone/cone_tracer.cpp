@@ -5,6 +5,7 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
+#include "voxcone/photon/photon_radiance.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
@@ -14,8 +15,10 @@
 
 namespace voxcone {
 
-ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& s)
-    : m_scene(scene), m_accel(accel), m_field(field), m_coneStep(s.coneStep), m_maxDistance(s.maxDistance),
+ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& s,
+                       const PhotonRadiance* photons)
+    : m_scene(scene), m_accel(accel), m_field(field), m_photons(photons && !photons->empty() ? photons : nullptr),
+      m_coneStep(s.coneStep), m_maxDistance(s.maxDistance),
       m_exactSegment(s.exactSegment), m_hitGather(s.hitGather) {
   const std::vector<int> levels = m_field.levels();
   if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
@@ -51,6 +54,12 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
   return out;
 }
 
+Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v) const {
+  if (m_photons) return m_photons->radiance(hit.surface, hit.side);
+  return m_field.coneSample(hit.surface.position + hit.side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
+      .radiance;
+}
+
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   const Material& m = m_scene.materials[sh.material];
@@ -84,15 +93,13 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   Vec3 C(0.0f);
   float tEnd = m_maxDistance;
   bool hitSurface = false;
-  Vec3 hitRadiance(0.0f);
+  Vec3 hitLight(0.0f);
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
     if (m_scene.materials[hit->surface.material].isDelta()) return continueSpecular(hit->surface, d, tanHalf, depth);
-    const float v = std::clamp(lookupSize(hit->t), m_v0, vMax);
-    return m_field.coneSample(hit->surface.position + hit->side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
-        .radiance;
+    return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax));
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
@@ -101,9 +108,9 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
       // A mirror or glass passes on what its exact reflected and refracted cones gather;
       // elsewhere the finest level around the hit, half a voxel towards the ray's side.
       if (m_scene.materials[hit->surface.material].isDelta())
-        hitRadiance = continueSpecular(hit->surface, d, tanHalf, depth);
+        hitLight = continueSpecular(hit->surface, d, tanHalf, depth);
       else
-        hitRadiance = m_field.coneSample(hit->surface.position + hit->side * (0.5f * m_v0), float(m_finest), d, apex).radiance;
+        hitLight = hitRadiance(*hit, d, apex, m_v0);
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);
@@ -146,7 +153,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     t += step;
   }
   // The exact hit covers what the march left open.
-  if (hitSurface && A < 1.0f) C += (1.0f - A) * hitRadiance;
+  if (hitSurface && A < 1.0f) C += (1.0f - A) * hitLight;
   return C;
 }
 

@@ -28,6 +28,10 @@ constexpr int kDefaultLevel = 5;
 constexpr int kDefaultGathers = 1;
 constexpr int kDefaultFilterRadius = 12;
 constexpr int kDefaultGatherSpacing = 4;
+/// The photon estimate at a cone's exact hit (PhotonRadiance): photons per estimate, and the
+/// largest search radius as a fraction of the scene's bounding-sphere radius.
+constexpr int kDefaultHitPhotons = 64;
+constexpr double kDefaultHitRadius = 0.1;
 }  // namespace
 
 const std::vector<std::string>& VoxelConeSettings::mipFilterNames() {
@@ -90,6 +94,9 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
     throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
   out.exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
   out.hitGather = r.choice("gather", {"march", "hit"}) == "hit";
+  out.hitPhotons = r.choice("hit_radiance", {"photons", "field"}) == "photons";
+  out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
+  out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
   const std::string view = r.choice("view", viewNames());
   out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
   r.finish();
@@ -116,6 +123,9 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"gather_spacing", gatherSpacing},
           {"exact_segment", exactSegment},
           {"gather", hitGather ? "hit" : "march"},
+          {"hit_radiance", hitPhotons ? "photons" : "field"},
+          {"hit_photons", hitEstimate.k},
+          {"hit_radius", hitEstimate.maxRadius},
           {"view", viewNames()[size_t(view)]},
           {"field", fieldPath}};
 }

@@ -30,6 +30,7 @@ nlohmann::json VoxelConeIntegrator::settingsJson() const {
 nlohmann::json VoxelConeIntegrator::statsJson() const {
   nlohmann::json j = m_stats;
   j["field_bytes"] = m_field.memoryBytes();
+  j["hit_photon_bytes"] = m_hitPhotons.memoryBytes();
   for (int level : m_field.levels()) j["active_voxels"][std::to_string(level)] = m_field.activeVoxels(level);
   return j;
 }
@@ -46,6 +47,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   if (!m_settings.fieldPath.empty() && !keepVoxels) {
     // A field read back (voxelize -o): its light, its settings; no photons traced.
     m_tracer.reset();
+    m_hitPhotons = PhotonRadiance();
     m_field = VoxelField::read(m_settings.fieldPath);
     m_field.checkScene(m_scene, m_settings.fieldPath);
     const uint64_t budget = m_settings.voxel.memoryBudgetBytes;
@@ -62,6 +64,12 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
   m_stats = maps.stats.toJson();
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
+  m_tracer.reset();
+  if (m_settings.hitPhotons) {
+    Timer kd;
+    m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
+    m_stats["hit_photons_seconds"] = kd.seconds();
+  }
   const uint64_t photonPeak = peakRssBytes();
   Timer t;
   if (!keepVoxels) {
@@ -85,7 +93,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
 }
 
 void VoxelConeIntegrator::startTracer() {
-  m_tracer.emplace(m_scene, m_accel, m_field, m_settings);
+  m_tracer.emplace(m_scene, m_accel, m_field, m_settings, &m_hitPhotons);
   const int causticLevel = m_field.settings().causticLevel;
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
 }

@@ -15,6 +15,7 @@ namespace voxcone {
 
 class Accel;
 class Scene;
+class PhotonRadiance;
 class VoxelField;
 struct VoxelConeSettings;
 
@@ -45,7 +46,10 @@ class ConeTracer {
 public:
   /// Cones in `field` (levels built), exact segments against `accel` on `scene`'s triangles,
   /// with `settings`' step, maximum distance, exact segment and gather mode. Holds references.
-  ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings);
+  /// With `photons` (not empty), the radiance at a cone's exact hit on a diffuse surface is
+  /// their estimate there (PhotonRadiance) instead of the field's finest level around it.
+  ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings,
+             const PhotonRadiance* photons = nullptr);
   /// The radiance one cone gathers from surface point p (rounding error pError, unit normal n
   /// on the side the cone leaves, unit direction d; dot(n, d) <= 0 gathers nothing), half-angle
   /// atan(tanHalf). Where the axis's exact ray meets a mirror or glass (delta materials), the
@@ -69,12 +73,16 @@ private:
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
   Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const;
+  /// The radiance a cone of direction d (apex `apex`) takes from the surface its exact ray hit
+  /// (not a delta one), looked up in the field at voxel size v where there are no photons.
+  Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v) const;
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
                                       float tMax) const;
 
   const Scene& m_scene;
   const Accel& m_accel;
   const VoxelField& m_field;
+  const PhotonRadiance* m_photons = nullptr;
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
   float m_v0 = 0.0f;  ///< finest voxel size

@@ -3,6 +3,7 @@
 /// voxcone's settings: what its options (`--options` JSON, voxel_cone.h lists them) set, with
 /// their defaults, read and checked in one place (Tungsten's per-integrator settings struct).
 
+#include "voxcone/photon/photon_radiance.h"
 #include "voxcone/photon/photon_tracer.h"
 #include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
@@ -36,6 +37,11 @@ struct VoxelConeSettings {
   int gatherSpacing = 4;        ///< one gathering pixel per spacing x spacing block
   float exactSegment = 32.0f;   ///< exact ray along each cone axis, finest voxels (0: off)
   bool hitGather = false;       ///< gather = "hit" instead of "march"
+  /// Where a cone's exact axis ray hits a diffuse surface, its radiance comes from the photons on
+  /// that surface and side in sight of the hit (PhotonRadiance, `hit_radiance` = "photons", the
+  /// default) or from the field's finest level around it ("field").
+  bool hitPhotons = true;
+  PhotonRadianceSettings hitEstimate;  ///< `hit_photons` (k), `hit_radius` (world units)
   View view = View::Full;
   /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead
   /// of tracing photons and voxelizing; its settings (levels, footprint, mip filter, photons)

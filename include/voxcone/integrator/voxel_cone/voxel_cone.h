@@ -156,6 +156,7 @@ private:
   float m_tanHalf = 0.0f;       ///< tan of the cones' half-angle
 
   VoxelField m_field;
+  PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
   nlohmann::json m_stats = nlohmann::json::object();

@@ -1,0 +1,133 @@
+// Photon density estimates at surface points, filtered to the point's own surface and side.
+
+#include "voxcone/photon/photon_radiance.h"
+
+#include "voxcone/accel/accel.h"
+#include "voxcone/core/ray.h"
+#include "voxcone/scene/bsdf.h"
+#include "voxcone/scene/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace voxcone {
+
+namespace {
+/// A photon's normal within 60 degrees of the point's side normal: the same surface (a corner
+/// voxel's 45 degrees still counts, a perpendicular wall does not).
+constexpr float kSameSurfaceCos = 0.5f;
+/// Photons farther from the point's tangent plane than this fraction of the search radius lie
+/// on another surface (a curved surface departs from its tangent plane by r^2 / 2R: a sphere of
+/// radius 2r still passes).
+constexpr float kPlaneSlab = 0.25f;
+/// Both ends of a visibility segment are lifted this fraction of the search radius off their
+/// surfaces (plus the point's rounding error): clear of the surface they lie on, far below any
+/// wall standing on it.
+constexpr float kLift = 1e-3f;
+/// Probes of the disc's own surface (coveredFraction): a Vogel spiral of this many points.
+constexpr int kAreaProbes = 16;
+
+/// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
+float pointHash(const Vec3& p) {
+  uint32_t h = 2166136261u;
+  for (int a = 0; a < 3; ++a) {
+    uint32_t bits;
+    std::memcpy(&bits, &p[a], sizeof bits);
+    h = (h ^ bits) * 16777619u;
+  }
+  h ^= h >> 15;
+  h *= 0x2c1b3c6du;
+  h ^= h >> 12;
+  return float(h >> 8) * 0x1p-24f;
+}
+}  // namespace
+
+PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const PhotonMaps& maps,
+                               const PhotonRadianceSettings& s)
+    : m_scene(&scene), m_accel(&accel), m_settings(s) {
+  m_photons.reserve(maps.global.size() + maps.caustic.size());
+  m_photons.insert(m_photons.end(), maps.global.begin(), maps.global.end());
+  m_photons.insert(m_photons.end(), maps.caustic.begin(), maps.caustic.end());
+  std::vector<Vec3> positions(m_photons.size());
+  for (size_t i = 0; i < m_photons.size(); ++i) positions[i] = m_photons[i].position;
+  m_tree = PhotonKdTree(positions);
+}
+
+size_t PhotonRadiance::memoryBytes() const {
+  // The tree keeps a position, an index and an axis per photon.
+  return m_photons.size() * (sizeof(Photon) + sizeof(Vec3) + sizeof(uint32_t) + 1);
+}
+
+float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r,
+                                      float lift) const {
+  // Probes spread uniformly over the disc (Vogel's spiral: radius sqrt((i + 1/2) / n), golden
+  // angle steps), each counted when (like a photon) it is in sight of the point along the
+  // surface and the surface lies under it, within the plane slab, facing the same way.
+  const Frame frame(side);
+  const float turn = 2.0f * kPi * pointHash(x);
+  const float slab = kPlaneSlab * r;
+  int covered = 0;
+  for (int i = 0; i < kAreaProbes; ++i) {
+    const float rho = r * std::sqrt((float(i) + 0.5f) / float(kAreaProbes));
+    const float phi = turn + float(i) * 2.39996323f;
+    const Vec3 probe = x + frame.toWorld(Vec3(rho * std::cos(phi), rho * std::sin(phi), 0.0f));
+    const Vec3 above = probe + side * lift;
+    Ray along;
+    along.origin = from;
+    along.dir = above - from;
+    along.tMax = 1.0f - kShadowEpsilon;
+    if (m_accel->occluded(along)) continue;
+    // The surface under the probe: a ray from the slab's top down through it.
+    Ray down;
+    down.origin = probe + side * slab;
+    down.dir = -side;
+    down.tMax = 2.0f * slab;
+    const std::optional<Hit> h = m_accel->intersect(down);
+    if (!h) continue;
+    const SurfaceHit under = m_scene->surfaceAt(h->triangle, h->b1, h->b2);
+    if (std::abs(glm::dot(under.geomNormal, side)) > kSameSurfaceCos) ++covered;
+  }
+  return float(std::max(covered, 1)) / float(kAreaProbes);
+}
+
+Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side) const {
+  thread_local std::vector<KdNeighbor> neighbors;
+  const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;
+  const size_t found = m_tree.knn(x, m_settings.k, maxDist2, neighbors);
+  if (found == 0) return Vec3(0.0f);
+  // The disc: out to the k-th photon, or the largest radius where fewer lie inside it.
+  const float r2 = found == size_t(m_settings.k) ? neighbors.back().dist2 : maxDist2;
+  if (!(r2 > 0.0f)) return Vec3(0.0f);
+  const float r = std::sqrt(r2);
+  const float lift = kLift * r;
+  const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
+  Vec3 sum(0.0f);
+  for (size_t i = 0; i < found; ++i) {
+    const Photon& ph = m_photons[neighbors[i].index];
+    if (glm::dot(ph.normal, side) <= kSameSurfaceCos) continue;
+    if (std::abs(glm::dot(ph.position - x, side)) > kPlaneSlab * r) continue;
+    // In sight: nothing between the point and the photon, both lifted off their surfaces.
+    Ray ray;
+    ray.origin = from;
+    ray.dir = ph.position + ph.normal * lift - from;
+    ray.tMax = 1.0f - kShadowEpsilon;
+    if (m_accel->occluded(ray)) continue;
+    sum += ph.power;
+  }
+  if (isBlack(sum)) return sum;
+  // Jensen eq. 7.6 before the BSDF, E = sum Phi / (pi r^2), over the part of the disc that is
+  // this surface in sight of the point: at a corner or an edge half the disc is not (a wall, a
+  // drop), and the plain estimate came out up to half as bright there.
+  return sum / (kPi * r2 * coveredFraction(x, side, from, r, lift));
+}
+
+Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {
+  if (m_photons.empty()) return Vec3(0.0f);
+  const Material& mat = m_scene->materials[hit.material];
+  if (!mat.isDiffuse()) return Vec3(0.0f);
+  // Diffuse reflection of the irradiance: albedo / pi (Oren-Nayar taken as Lambertian here).
+  return mat.albedo * kInvPi * irradianceAt(hit.position, hit.positionError, side);
+}
+
+}  // namespace voxcone

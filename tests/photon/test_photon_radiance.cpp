@@ -1,0 +1,128 @@
+// PhotonRadiance: the density estimate against a closed form, and its filters: a wall between
+// the point and a photon, however thin, the other side of a panel, another surface nearby.
+
+#include "voxcone/accel/accel.h"
+#include "voxcone/core/rng.h"
+#include "voxcone/photon/photon_radiance.h"
+#include "voxcone/scene/scene.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace voxcone {
+namespace {
+
+/// A 4 x 4 floor (y = 0, two quads meeting at x = 0) and a wall of thickness `t` standing on it
+/// across x in [0, t], 1 high, wholly dividing the floor; Lambertian albedo 0.5.
+Scene wallScene(float t) {
+  const std::string json = R"({
+    "camera": {"position": [0, 2, -5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40},
+    "materials": {"w": {"type": "lambertian", "albedo": 0.5}},
+    "shapes": [
+      {"type": "quad", "material": "w", "vertices": [[-2, 0, -2], [-2, 0, 2], [0, 0, 2], [0, 0, -2]]},
+      {"type": "quad", "material": "w", "vertices": [[0, 0, -2], [0, 0, 2], [2, 0, 2], [2, 0, -2]]},
+      {"type": "quad", "material": "w", "vertices": [[0, 0, -2], [0, 1, -2], [0, 1, 2], [0, 0, 2]]},
+      {"type": "quad", "material": "w", "vertices": [[T, 0, -2], [T, 0, 2], [T, 1, 2], [T, 1, -2]]},
+      {"type": "quad", "material": "w", "vertices": [[0, 1, -2], [0, 1, 2], [T, 1, 2], [T, 1, -2]]}
+    ],
+    "lights": [{"type": "point", "position": [-1, 3, 0], "intensity": 1}]})";
+  std::string s = json;
+  for (size_t at; (at = s.find('T')) != std::string::npos;) s.replace(at, 1, std::to_string(t));
+  return parseScene(s, "wall", ".");
+}
+
+/// `count` photons of power `each` uniformly over the floor's region x in [x0, x1], z in
+/// [-2, 2], arrived from above.
+void addFloorPhotons(std::vector<Photon>& out, int count, float x0, float x1, float each, uint64_t seed) {
+  Rng rng(seed, 0);
+  for (int i = 0; i < count; ++i) {
+    Photon p;
+    p.position = Vec3(x0 + (x1 - x0) * rng.uniform(), 0.0f, -2.0f + 4.0f * rng.uniform());
+    p.power = Vec3(each);
+    p.normal = Vec3(0, 1, 0);
+    p.incident = glm::normalize(Vec3(0.3f, 1.0f, 0.2f));
+    p.albedo = Vec3(0.5f);
+    out.push_back(p);
+  }
+}
+
+SurfaceHit floorHit(const Scene& scene, float x, float z) {
+  SurfaceHit h;
+  h.position = Vec3(x, 0.0f, z);
+  h.geomNormal = h.shadingNormal = Vec3(0, 1, 0);
+  h.material = scene.triMaterial[0];
+  return h;
+}
+
+TEST(PhotonRadiance, UniformPhotonsGiveAlbedoOverPiTimesIrradiance) {
+  // 80k photons of 1e-4 W over 8 m^2 of floor (no wall): E = 1 W/m^2, L = 0.5 / pi. The estimate
+  // of k = 400 photons has a relative standard deviation of about 1 / sqrt(400) = 5%; bound 12%.
+  const Scene scene = wallScene(0.0055f);
+  PhotonMaps maps;
+  addFloorPhotons(maps.global, 80000, -2.0f, 0.0f, 1e-4f, 1);
+  const auto accel = buildAccel("hbvh", scene);
+  PhotonRadiance est(scene, *accel, maps, {400, 1.0f});
+  const float expected = 0.5f / kPi;
+  for (float z : {-1.0f, 0.0f, 1.0f}) {
+    const Vec3 L = est.radiance(floorHit(scene, -1.0f, z), Vec3(0, 1, 0));
+    EXPECT_NEAR(L.x, expected, 0.12f * expected) << "z " << z;
+  }
+  // From below the floor (the other side), nothing arrived.
+  EXPECT_EQ(est.radiance(floorHit(scene, -1.0f, 0.0f), Vec3(0, -1, 0)), Vec3(0.0f));
+}
+
+TEST(PhotonRadiance, NoLightThroughAThinWall) {
+  // The lit half of the floor (x < 0) is 5.5 mm from points on the dark half (x > t): their
+  // search discs reach across the wall, but no photon is in sight of them.
+  for (float t : {0.0055f, 0.0005f}) {
+    const Scene scene = wallScene(t);
+    PhotonMaps maps;
+    addFloorPhotons(maps.global, 40000, -2.0f, 0.0f, 1e-4f, 2);
+    const auto accel = buildAccel("hbvh", scene);
+    PhotonRadiance est(scene, *accel, maps, {64, 1.0f});
+    for (float x : {t + 0.001f, t + 0.01f, t + 0.1f})
+      EXPECT_EQ(est.radiance(floorHit(scene, x, 0.3f), Vec3(0, 1, 0)), Vec3(0.0f)) << t << " " << x;
+    // Right beside the wall on the lit side the estimate is lit.
+    EXPECT_GT(est.radiance(floorHit(scene, -0.01f, 0.3f), Vec3(0, 1, 0)).x, 0.0f);
+  }
+}
+
+TEST(PhotonRadiance, ThePhotonsOfAnotherSurfaceDoNotCount) {
+  const Scene scene = wallScene(0.0055f);
+  const auto accel = buildAccel("hbvh", scene);
+  // Photons on the wall's lit face (x = 0, arrived from -x), 5 cm above the floor point.
+  PhotonMaps maps;
+  Rng rng(3, 0);
+  for (int i = 0; i < 2000; ++i) {
+    Photon p;
+    p.position = Vec3(0.0f, 0.01f + 0.1f * rng.uniform(), -0.5f + rng.uniform());
+    p.power = Vec3(1e-3f);
+    p.normal = Vec3(-1, 0, 0);
+    p.incident = Vec3(-1, 0, 0);
+    p.albedo = Vec3(0.5f);
+    maps.global.push_back(p);
+  }
+  PhotonRadiance est(scene, *accel, maps, {64, 1.0f});
+  // The floor beside it (normal +y, 90 degrees off) takes none of it; the face itself does.
+  EXPECT_EQ(est.radiance(floorHit(scene, -0.02f, 0.0f), Vec3(0, 1, 0)), Vec3(0.0f));
+  SurfaceHit face = floorHit(scene, 0.0f, 0.0f);
+  face.position = Vec3(0.0f, 0.05f, 0.0f);
+  face.geomNormal = face.shadingNormal = Vec3(-1, 0, 0);
+  EXPECT_GT(est.radiance(face, Vec3(-1, 0, 0)).x, 0.0f);
+  // The wall's far face (x = t, seen from +x) is dark.
+  face.position.x = 0.0055f;
+  face.geomNormal = face.shadingNormal = Vec3(1, 0, 0);
+  EXPECT_EQ(est.radiance(face, Vec3(1, 0, 0)), Vec3(0.0f));
+}
+
+TEST(PhotonRadiance, NoPhotonsNoLight) {
+  const Scene scene = wallScene(0.0055f);
+  const auto accel = buildAccel("hbvh", scene);
+  PhotonRadiance est(scene, *accel, PhotonMaps(), {64, 1.0f});
+  EXPECT_TRUE(est.empty());
+  EXPECT_EQ(est.radiance(floorHit(scene, -1.0f, 0.0f), Vec3(0, 1, 0)), Vec3(0.0f));
+}
+
+}  // namespace
+}  // namespace voxcone
