@@ -22,11 +22,13 @@ constexpr float kSameSurfaceCos = 0.5f;
 /// radius 2r still passes).
 constexpr float kPlaneSlab = 0.25f;
 /// Both ends of a visibility segment are lifted this fraction of the search radius off their
-/// surfaces (plus the point's rounding error): clear of the surface they lie on, far below any
-/// wall standing on it.
-constexpr float kLift = 1e-3f;
+/// surfaces along their own normals (plus the point's rounding error): clear of the surface
+/// they lie on, far below any wall standing on it. The chord between two points of a convex
+/// surface of radius R runs inside it beyond a distance of about 2 sqrt(2 R lift): at 1e-3 r a
+/// 4 cm cup saw its own photons only within 3 mm (r = 0.1 m); at 0.05 r within 2.5 cm.
+constexpr float kLift = 0.05f;
 /// Probes of the disc's own surface (coveredFraction): a Vogel spiral of this many points.
-constexpr int kAreaProbes = 16;
+constexpr int kAreaProbes = 8;
 
 /// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
 float pointHash(const Vec3& p) {
@@ -72,12 +74,6 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
     const float rho = r * std::sqrt((float(i) + 0.5f) / float(kAreaProbes));
     const float phi = turn + float(i) * 2.39996323f;
     const Vec3 probe = x + frame.toWorld(Vec3(rho * std::cos(phi), rho * std::sin(phi), 0.0f));
-    const Vec3 above = probe + side * lift;
-    Ray along;
-    along.origin = from;
-    along.dir = above - from;
-    along.tMax = 1.0f - kShadowEpsilon;
-    if (m_accel->occluded(along)) continue;
     // The surface under the probe: a ray from the slab's top down through it.
     Ray down;
     down.origin = probe + side * slab;
@@ -86,7 +82,14 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
     const std::optional<Hit> h = m_accel->intersect(down);
     if (!h) continue;
     const SurfaceHit under = m_scene->surfaceAt(h->triangle, h->b1, h->b2);
-    if (std::abs(glm::dot(under.geomNormal, side)) > kSameSurfaceCos) ++covered;
+    const Vec3 n = glm::dot(under.geomNormal, side) >= 0.0f ? under.geomNormal : -under.geomNormal;
+    if (glm::dot(n, side) <= kSameSurfaceCos) continue;
+    // In sight of the point, lifted off both surfaces as a photon there would be.
+    Ray along;
+    along.origin = from;
+    along.dir = under.position + n * lift - from;
+    along.tMax = 1.0f - kShadowEpsilon;
+    if (!m_accel->occluded(along)) ++covered;
   }
   return float(std::max(covered, 1)) / float(kAreaProbes);
 }
@@ -102,8 +105,12 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
   const float r = std::sqrt(r2);
   const float lift = kLift * r;
   const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
+  // With k found, the k-th photon only marks the radius: (k - 1) / (pi r_k^2) is the unbiased
+  // density of a uniform process, k / (pi r_k^2) is k / (k - 1) too high (Jensen's estimate
+  // counts it; at k = 32 the hall came out 3% brighter).
+  const size_t counted = found == size_t(m_settings.k) && found > 1 ? found - 1 : found;
   Vec3 sum(0.0f);
-  for (size_t i = 0; i < found; ++i) {
+  for (size_t i = 0; i < counted; ++i) {
     const Photon& ph = m_photons[neighbors[i].index];
     if (glm::dot(ph.normal, side) <= kSameSurfaceCos) continue;
     if (std::abs(glm::dot(ph.position - x, side)) > kPlaneSlab * r) continue;

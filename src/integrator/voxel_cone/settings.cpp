@@ -28,10 +28,18 @@ constexpr int kDefaultLevel = 5;
 constexpr int kDefaultGathers = 1;
 constexpr int kDefaultFilterRadius = 12;
 constexpr int kDefaultGatherSpacing = 4;
+/// Cones per gather: with gather = "hit" (the default) each is one exact ray and one photon
+/// estimate at its hit; with "march", 6 marched cones (their defaults' measurements above).
+constexpr int kDefaultHitCones = 32;
+constexpr int kDefaultMarchCones = 6;
 /// The photon estimate at a cone's exact hit (PhotonRadiance): photons per estimate, and the
 /// largest search radius as a fraction of the scene's bounding-sphere radius.
-constexpr int kDefaultHitPhotons = 64;
+constexpr int kDefaultHitPhotons = 32;
 constexpr double kDefaultHitRadius = 0.1;
+/// Photons in the cells the camera's gathers read (VoxelConeSettings::photonTarget), and the most
+/// photons emitted to get them.
+constexpr int kDefaultPhotonTarget = 100000;
+constexpr int kDefaultMaxPhotons = 2000000;
 }  // namespace
 
 const std::vector<std::string>& VoxelConeSettings::mipFilterNames() {
@@ -80,8 +88,14 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   p.seed = render.seed + uint64_t(r.integer("seed", 0, 0, kMaxInt));
   p.maxDepth = std::max(1, render.maxDepth);
   if (!anyDelta || v.causticLevel == 0) p.causticPhotons = 0;
+  const bool photonsGiven = r.has("photons") || render.photons > 0 || !out.fieldPath.empty();
+  out.photonTarget = uint64_t(r.integer("photon_target", photonsGiven ? 0 : kDefaultPhotonTarget, 0, kMaxInt));
+  out.maxPhotons = uint64_t(r.integer("max_photons", kDefaultMaxPhotons, 1, kMaxInt));
+  if (photonsGiven && out.photonTarget > 0)
+    throw SettingsError("voxcone.photon_target: the photon count is given (photons); give one or the other");
 
-  out.cones = r.integer("cones", 6, 1, 256);
+  out.hitGather = r.choice("gather", {"hit", "march"}) == "hit";
+  out.cones = r.integer("cones", out.hitGather ? kDefaultHitCones : kDefaultMarchCones, 1, 256);
   out.coneAngleDeg = r.number("cone_angle", 0.0, 0.0, 89.0);
   out.coneStep = float(r.number("cone_step", 1.0, 0.25, 4.0));
   const float sceneRadius = std::max(0.0f, scene.boundingSphere().radius);
@@ -93,7 +107,6 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   if (out.gatherSpacing > 1 && out.filterRadius == 0)
     throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
   out.exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
-  out.hitGather = r.choice("gather", {"march", "hit"}) == "hit";
   out.hitPhotons = r.choice("hit_radiance", {"photons", "field"}) == "photons";
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
@@ -111,6 +124,8 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"kernel_sigma", voxel.kernelSigmaVoxels},
           {"mip_filter", mipFilterNames()[size_t(voxel.mipFilter)]},
           {"photons", photons.photons},
+          {"photon_target", photonTarget},
+          {"max_photons", maxPhotons},
           {"caustic_photons", photons.causticPhotons},
           {"photon_seed", photons.seed},
           {"cones", cones},

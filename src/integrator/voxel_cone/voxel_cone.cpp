@@ -8,6 +8,7 @@
 #include "voxcone/core/timer.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/whitted.h"
+#include "voxcone/photon/seen_region.h"
 #include "voxcone/scene/bsdf.h"
 
 #include <tbb/parallel_for.h>
@@ -42,6 +43,35 @@ void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
   build(m_tracer.has_value() && m_settings.voxel.causticLevel == 0, progress);
 }
 
+PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
+  m_stats = nlohmann::json::object();
+  PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
+  if (m_settings.photonTarget == 0) return maps;
+  // The cells the camera's gathers read: cubes of a 64th of the scene's bounding-sphere
+  // diameter, about the photon estimate's search radius (hit_radius).
+  Timer t;
+  const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
+  const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
+  uint64_t inSeen = seen.count(maps.global);
+  m_stats["seen_cells"] = seen.cells();
+  m_stats["pilot_photons"] = {{"emitted", maps.stats.emittedGlobal}, {"stored", maps.global.size()}, {"seen", inSeen}};
+  if (inSeen < m_settings.photonTarget) {
+    // The share the pilot put in the seen cells sets the count (5% over, whole blocks of 1024);
+    // none at all: the most allowed.
+    const double share = double(inSeen) / double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
+    const double wanted = share > 0.0 ? 1.05 * double(m_settings.photonTarget) / share : double(m_settings.maxPhotons);
+    PhotonSettings more = m_settings.photons;
+    more.photons = std::min<uint64_t>(m_settings.maxPhotons, (uint64_t(std::ceil(wanted)) + 1023) / 1024 * 1024);
+    if (more.photons > maps.stats.emittedGlobal) {
+      maps = tracePhotons(m_scene, m_accel, more, progress);
+      inSeen = seen.count(maps.global);
+    }
+  }
+  m_stats["seen_photons"] = inSeen;
+  m_stats["seen_seconds"] = t.seconds();
+  return maps;
+}
+
 void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   Timer total;
   if (!m_settings.fieldPath.empty() && !keepVoxels) {
@@ -61,8 +91,8 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     startTracer();
     return;
   }
-  const PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
-  m_stats = maps.stats.toJson();
+  const PhotonMaps maps = tracePhotonsForView(progress);
+  m_stats.update(maps.stats.toJson());
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
   m_tracer.reset();
   if (m_settings.hitPhotons) {
@@ -80,7 +110,15 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   // The process's peak resident set after each stage (its high-water mark so far).
   nlohmann::json peakAfter = {{"photons", photonPeak}, {"voxelize", peakRssBytes()}};
   t.reset();
-  m_field.inject(maps, progress);
+  if (m_settings.hitGather && m_settings.hitPhotons && m_settings.view != View::Field) {
+    // Cones read no voxel then (their exact hits take the photons): the main grid keeps only
+    // the caustic photons, which the caustic grid's lookups at shading points need.
+    PhotonMaps causticOnly;
+    causticOnly.caustic = maps.caustic;
+    m_field.inject(causticOnly, progress);
+  } else {
+    m_field.inject(maps, progress);
+  }
   m_stats["inject_seconds"] = t.seconds();
   peakAfter["inject"] = peakRssBytes();
   t.reset();

@@ -114,19 +114,29 @@ TEST(VoxelCone, ThinWallLeakIsMeasuredAndExactSegmentsCutIt) {
   const Scene scene = thinWall(s);
   const Image path = renderWith(scene, "path", s).image;
   EXPECT_EQ(imageMean(path, 0, 15).x, 0.0f);  // no light path reaches the right room
+  // The marched cones reading the field's voxels: the field's own leak, and the exact segment
+  // that cuts it.
   auto leak = [&](double segment) {
     // Cones on every sample, no filter: the cones' own leak.
     const Image img = renderWith(scene, "voxcone", s,
-                                 {{"level", 5}, {"photons", 50000}, {"exact_segment", segment}, {"gathers", 0}, {"filter", 0}})
+                                 {{"gather", "march"}, {"hit_radiance", "field"}, {"level", 5}, {"photons", 50000},
+                                  {"exact_segment", segment}, {"gathers", 0}, {"filter", 0}})
                           .image;
     return imageMean(img, 0, 15).x / imageMean(img, 17, 32).x;
   };
   const float before = leak(0.0), after = leak(64.0);
-  const Image hit = renderWith(scene, "voxcone", s, {{"level", 5}, {"photons", 50000}, {"gather", "hit"}}).image;
-  // gather = "hit" has exact visibility everywhere but filters the radiance at the hit over the
-  // cone's width, and that lookup reaches through the wall: it leaks as much as no mitigation
+  auto hitLeak = [&](const char* hitRadiance) {
+    const Image hit = renderWith(scene, "voxcone", s,
+                                 {{"level", 5}, {"photons", 50000}, {"cones", 6}, {"hit_radiance", hitRadiance}})
+                          .image;
+    return imageMean(hit, 0, 15).x / imageMean(hit, 17, 32).x;
+  };
+  // gather = "hit" reading the field at its hits filters the radiance there over the cone's
+  // width, and that lookup reaches through the wall: it leaks as much as no mitigation
   // (measured 1.04% at level 5, 0.95% at level 6, 64x32 at 16 spp). This shows the failure.
-  EXPECT_GT(imageMean(hit, 0, 15).x / imageMean(hit, 17, 32).x, 0.005f);
+  EXPECT_GT(hitLeak("field"), 0.005f);
+  // The default, the photons on the hit's own surface and side in sight of it: none.
+  EXPECT_EQ(hitLeak("photons"), 0.0f);
   // Measured (64x32, 16 spp): 1.04% before, 0.34% after at level 5 (here, 32x16 at 4 spp:
   // 1.00% and 0.30%). Each voxel keeps the two sides of the wall apart; what is left
   // comes from coarse voxels that mix both rooms' walls.
@@ -203,7 +213,8 @@ TEST(VoxelCone, EveryRegionOfCornellBoxMatchesConvergedPathButTheShortBlocksFron
   // it sees most of is the floor in front of it, which the block shadows; at level 6 the field's
   // floor voxels and the photon footprints there mix that shadow with the lit floor beyond it,
   // and the coarse mips mix it more. With the field's boundary on the walls it was +35% at
-  // 256x256 (now +20%).
+  // 256x256 (now +20%). With the photons at the cones' hits (the default since) it is +17% here
+  // and +5% at 256x256, where the screen-space filter's 12 pixels cover a quarter of the area.
   const std::vector<double> r = regionRatiosAgainstPath(cornellBox());
   for (size_t i = 0; i < r.size(); ++i) {
     if (i == 14) continue;
@@ -270,19 +281,22 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
       const float vc = floorRadiance(scene, "voxcone", options, at.x, at.y, 256).x;
       return vc / ref;
     };
-    // The default (6 marched cones): measured +6.8% / +5.7% at the two points (+15.8% / +15.4%
-    // before the field had a margin: the plane lay on its boundary). Besides the field's own
-    // error, lookups beside the occluder's edge count part of it for axes that just miss it,
-    // while axes that just hit it count it whole (the exact segment). It was +33% before the
-    // march followed the cone's own axis, and +1000% when the occluder's voxels mixed its lit
-    // top into its underside.
+    // The default (32 cones, each an exact ray and the photon estimate at its hit): measured
+    // +5.4% / +6.4% at the two points.
     EXPECT_NEAR(ratio({}), 1.0f, 0.1f);
-    // gather = hit with narrow cones is close; with the 6 default cones it fails: a cone whose
-    // axis misses the occluder counts none of it (and one that hits counts all), and its
-    // lookup at the cone's width mixes the underside with the floor: measured -9% / -23%
-    // (-45% / -54% without the field's margin); narrow cones +5.9% / +7.4%.
-    EXPECT_NEAR(ratio({{"gather", "hit"}, {"cones", 64}}), 1.0f, 0.1f);
-    EXPECT_LT(ratio({{"gather", "hit"}}), 0.95f);
+    // The earlier default, 6 cones marched through the field's voxels: measured +6.8% / +5.7%
+    // (+15.8% / +15.4% before the field had a margin: the plane lay on its boundary). Besides
+    // the field's own error, lookups beside the occluder's edge count part of it for axes that
+    // just miss it, while axes that just hit it count it whole (the exact segment). It was +33%
+    // before the march followed the cone's own axis, and +1000% when the occluder's voxels mixed
+    // its lit top into its underside.
+    EXPECT_NEAR(ratio({{"gather", "march"}, {"cones", 6}, {"hit_radiance", "field"}}), 1.0f, 0.1f);
+    // gather = hit reading the field at its hits: close with narrow cones; with 6 cones it fails:
+    // a cone whose axis misses the occluder counts none of it (and one that hits counts all),
+    // and its lookup at the cone's width mixes the underside with the floor: measured -9% /
+    // -23% (-45% / -54% without the field's margin); narrow cones +5.9% / +7.4%.
+    EXPECT_NEAR(ratio({{"cones", 64}, {"hit_radiance", "field"}}), 1.0f, 0.1f);
+    EXPECT_LT(ratio({{"cones", 6}, {"hit_radiance", "field"}}), 0.95f);
   }
 }
 

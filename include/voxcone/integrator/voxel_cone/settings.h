@@ -27,7 +27,13 @@ struct VoxelConeSettings {
   int maxDepth = 16;            ///< longest specular chain (the render's max depth)
   VoxelSettings voxel;          ///< level, coarsest level, caustic level, photon footprint
   PhotonSettings photons;       ///< global and caustic photons, seed (render seed + `seed`)
-  int cones = 6;                ///< cones per gather, [1, 256]
+  /// `photon_target`: with no photon count given (neither `photons` nor the scene's), the
+  /// global photons are as many as put this many in the cells the camera's gathers read
+  /// (SeenRegion): a pilot pass of photons.photons measures the share that lands there, and a
+  /// second pass traces the count that share needs, up to `max_photons`. 0: photons.photons.
+  uint64_t photonTarget = 0;
+  uint64_t maxPhotons = 0;
+  int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
   double coneAngleDeg = 0.0;    ///< half-angle, degrees; 0: ConeSet's default for the count
   float coneStep = 1.0f;        ///< march step in lookup voxels, [0.25, 4]
   float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter
@@ -36,7 +42,7 @@ struct VoxelConeSettings {
   int filterRadius = 12;        ///< screen-space filter radius, pixels (0: off)
   int gatherSpacing = 4;        ///< one gathering pixel per spacing x spacing block
   float exactSegment = 32.0f;   ///< exact ray along each cone axis, finest voxels (0: off)
-  bool hitGather = false;       ///< gather = "hit" instead of "march"
+  bool hitGather = true;        ///< gather = "hit" (the default) instead of "march"
   /// Where a cone's exact axis ray hits a diffuse surface, its radiance comes from the photons on
   /// that surface and side in sight of the hit (PhotonRadiance, `hit_radiance` = "photons", the
   /// default) or from the field's finest level around it ("field").

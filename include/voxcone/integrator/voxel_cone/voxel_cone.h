@@ -141,6 +141,10 @@ private:
   /// direct, caustic and indirect parts are added there, times `weight` (the delta chain's).
   Vec3 shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split, RadianceTerms* terms,
              const Vec3& weight) const;
+  /// The photon maps: settings.photons photons, or with a photon target as many as put that
+  /// many in the cells the camera's gathers read (a pilot pass, then the count its share
+  /// needs). Starts m_stats with the seen cells and photons.
+  PhotonMaps tracePhotonsForView(Progress* progress);
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
   /// The cone tracer over the field just built or read, and the caustic voxel size.

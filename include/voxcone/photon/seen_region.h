@@ -1,0 +1,45 @@
+#pragma once
+/// \file seen_region.h
+/// Where the camera's gathers read photons: the cells of a uniform grid that hold a surface the
+/// camera sees (through mirrors and glass) or one that a gather from such a surface reaches
+/// (visual importance traced from the camera, one diffuse bounce deep: Peter and Pietrek 1998
+/// trace it further to guide emission; here it measures how many of the photons traced are of
+/// use, so that voxcone can trace as many as the seen part needs).
+
+#include "voxcone/core/math.h"
+#include "voxcone/photon/photon_tracer.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace voxcone {
+
+class Accel;
+class Scene;
+
+/// A set of grid cells, immutable after construction.
+class SeenRegion {
+public:
+  SeenRegion() = default;
+  /// Cells of size `cellSize` (world units, > 0) holding the first non-delta hit of a
+  /// `raysX` x `raysY` grid of camera rays over a `width` x `height` image (delta surfaces
+  /// followed along their strongest lobe, up to 8 bounces), and the hits of `gathers`
+  /// cosine-distributed rays from each of those points (the side the camera sees).
+  /// Deterministic (no randomness; any thread count).
+  SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX = 64,
+             int raysY = 64, int gathers = 16);
+  /// Whether worldPos lies in a seen cell.
+  bool contains(const Vec3& worldPos) const;
+  /// Photons of `photons` in seen cells.
+  uint64_t count(const std::vector<Photon>& photons) const;
+  size_t cells() const { return m_keys.size(); }
+  float cellSize() const { return m_cellSize; }
+
+private:
+  uint64_t keyOf(const Vec3& worldPos) const;
+  float m_cellSize = 1.0f;
+  Vec3 m_origin{0.0f};
+  std::vector<uint64_t> m_keys;  ///< sorted, unique
+};
+
+}  // namespace voxcone

@@ -1,0 +1,90 @@
+// The cells the camera's gathers read photons from.
+
+#include "voxcone/photon/seen_region.h"
+
+#include "voxcone/accel/accel.h"
+#include "voxcone/core/sampling.h"
+#include "voxcone/scene/bsdf.h"
+#include "voxcone/scene/scene.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace voxcone {
+
+namespace {
+/// Delta bounces followed from the camera before giving up on a ray.
+constexpr int kMaxDeltaBounces = 8;
+}  // namespace
+
+uint64_t SeenRegion::keyOf(const Vec3& worldPos) const {
+  // 21 bits per axis; the grid starts at the scene's lower corner, and points outside clamp.
+  const Vec3 q = (worldPos - m_origin) / m_cellSize;
+  uint64_t key = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double c = std::clamp(double(std::floor(q[a])), 0.0, double((1 << 21) - 1));
+    key = (key << 21) | uint64_t(c);
+  }
+  return key;
+}
+
+SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX,
+                       int raysY, int gathers)
+    : m_cellSize(cellSize), m_origin(scene.bounds().lo) {
+  std::vector<std::vector<uint64_t>> rows(size_t(std::max(raysY, 0)));
+  const int strata = std::max(1, int(std::lround(std::sqrt(double(gathers)))));
+  tbb::parallel_for(0, raysY, [&](int y) {
+    std::vector<uint64_t>& out = rows[size_t(y)];
+    for (int x = 0; x < raysX; ++x) {
+      Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
+                                         (float(y) + 0.5f) / float(raysY) * float(height), width, height);
+      // The first non-delta surface along the strongest lobe of each mirror or glass met.
+      SurfaceHit sh;
+      bool found = false;
+      for (int bounce = 0; bounce <= kMaxDeltaBounces; ++bounce) {
+        if (!intersectSurface(scene, accel, ray, sh)) break;
+        const Material& m = scene.materials[sh.material];
+        if (!m.isDelta()) {
+          found = true;
+          break;
+        }
+        const Frame frame(sh.shadingNormal);
+        DeltaLobe lobes[2];
+        const int n = bsdfDeltaLobes(m, frame.toLocal(-glm::normalize(ray.dir)), lobes);
+        if (n == 0) break;
+        const int best = n == 2 && maxComponent(lobes[1].weight) > maxComponent(lobes[0].weight) ? 1 : 0;
+        ray = spawnRay(sh.position, sh.positionError, sh.geomNormal, frame.toWorld(lobes[best].wi));
+      }
+      if (!found) continue;
+      out.push_back(keyOf(sh.position));
+      // Gathers from the side the camera sees: a stratified cosine-distributed set.
+      const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
+      const Frame frame(ng);
+      for (int i = 0; i < strata * strata; ++i) {
+        const Vec2 u((float(i % strata) + 0.5f) / float(strata), (float(i / strata) + 0.5f) / float(strata));
+        const Ray g = spawnRay(sh.position, sh.positionError, ng, frame.toWorld(sampleCosineHemisphere(u)));
+        SurfaceHit gh;
+        if (intersectSurface(scene, accel, g, gh)) out.push_back(keyOf(gh.position));
+      }
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  });
+  for (const std::vector<uint64_t>& r : rows) m_keys.insert(m_keys.end(), r.begin(), r.end());
+  std::sort(m_keys.begin(), m_keys.end());
+  m_keys.erase(std::unique(m_keys.begin(), m_keys.end()), m_keys.end());
+}
+
+bool SeenRegion::contains(const Vec3& worldPos) const {
+  return std::binary_search(m_keys.begin(), m_keys.end(), keyOf(worldPos));
+}
+
+uint64_t SeenRegion::count(const std::vector<Photon>& photons) const {
+  uint64_t n = 0;
+  for (const Photon& p : photons) n += contains(p.position) ? 1 : 0;
+  return n;
+}
+
+}  // namespace voxcone
