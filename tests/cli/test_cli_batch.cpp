@@ -332,7 +332,10 @@ TEST_F(Batch, MetricsAgainstTheReferenceMatchCompare) {
 TEST_F(Batch, MemoryBudgetFailsTheJobNotTheBatch) {
   nlohmann::json m = gridManifest();
   m.erase("grid");
-  m["jobs"].push_back({{"name", "big"}, {"method", "voxcone"}, {"options", {{"level", 9}, {"photons", 200000}}}});
+  // Marched cones: the field holds every photon (with the default gather = "hit" it holds only
+  // caustic ones, and level 9 fits).
+  m["jobs"].push_back(
+      {{"name", "big"}, {"method", "voxcone"}, {"options", {{"level", 9}, {"photons", 200000}, {"gather", "march"}}}});
   const std::string manifest = writeManifest(m);
   // The executable and its libraries alone take ~130 MB; level 9 needs more than 200 MB.
   EXPECT_EQ(run("batch " + manifest + " --memory-budget-mb 200 -t 1 -q -o " + path("out")), 1);

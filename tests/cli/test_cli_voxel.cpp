@@ -59,11 +59,13 @@ TEST_F(CliVoxel, VoxelizeBadInputFailsWithoutOutput) {
 
 TEST_F(CliVoxel, RenderWithAFieldReadBack) {
   // A field written by voxelize renders as the render's own field does: the same photons (the
-  // render's seed and counts), so the same image to the bit.
+  // render's seed and counts), so the same image to the bit. (A field read back has no photons:
+  // its cones read the field at their hits, as hit_radiance = field does.)
   ASSERT_EQ(run("voxelize " + scene() + " --level 5 --photons 10000 -q -o " + path("f.vdb"), path("o.txt")), 0);
   const std::string common = " --res 32x32 --spp 2 -t 2 -q --max-depth 16 ";
   ASSERT_EQ(run("render " + scene() + common + "--field " + path("f.vdb") + " -o " + path("a"), path("o.txt")), 0);
-  ASSERT_EQ(run("render " + scene() + common + "--options '{\"level\": 5, \"photons\": 10000}' -o " + path("b"), path("o.txt")), 0);
+  const std::string options = "'{\"level\": 5, \"coarsest_level\": 2, \"photons\": 10000, \"hit_radiance\": \"field\"}'";
+  ASSERT_EQ(run("render " + scene() + common + "--options " + options + " -o " + path("b"), path("o.txt")), 0);
   std::ifstream side(path("a.json"));
   const nlohmann::json j = nlohmann::json::parse(side);
   EXPECT_EQ(j["settings"]["integrator"]["field"], path("f.vdb"));

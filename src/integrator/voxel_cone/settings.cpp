@@ -107,7 +107,10 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   if (out.gatherSpacing > 1 && out.filterRadius == 0)
     throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
   out.exactSegment = float(r.number("exact_segment", 32.0, 0.0, 1e6));
-  out.hitPhotons = r.choice("hit_radiance", {"photons", "field"}) == "photons";
+  // A field read back has no photons: its cones read it at their hits.
+  out.hitPhotons = r.choice("hit_radiance", {"photons", "field"}) == "photons" && out.fieldPath.empty();
+  if (!out.fieldPath.empty() && r.has("hit_radiance") && options["hit_radiance"] == "photons")
+    throw SettingsError("voxcone.hit_radiance: a field read back (voxcone.field) has no photons; give \"field\" or nothing");
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
   const std::string view = r.choice("view", viewNames());
