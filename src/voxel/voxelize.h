@@ -1,7 +1,7 @@
 #pragma once
 /// \file voxelize.h (private to src/voxel/)
 /// Triangle voxelization into plain sorted arrays, free of OpenVDB types so that it compiles
-/// fast; voxel_field.cpp turns the arrays into the sparse OpenVDB-indexed levels.
+/// fast; level.cpp (LevelBuilder) turns the arrays into the sparse OpenVDB-indexed levels.
 
 #include "voxcone/core/math.h"
 #include "voxcone/core/progress.h"

@@ -153,7 +153,7 @@ public:
   /// bricks of a probe level (level - 2, at most 9) voxelized exactly and streamed away, and
   /// per finest level the bricks of level L taken as the probe's voxels two levels down, the
   /// voxels per brick as the probe's (surfaces fill bricks alike at every level), the stated
-  /// bytes per voxel and per brick of each grid (voxel_field.cpp), every voxel lit. With
+  /// bytes per voxel and per brick of each grid (src/voxel/level.h), every voxel lit. With
   /// `quick`, first an upper bound from the triangles' voxel boxes, and the count only when the
   /// bound exceeds `budget`. Rows for every finest level from settings.coarsestLevel up to
   /// settings.level. Measured against the built fields in tests/voxel.
