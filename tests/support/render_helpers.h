@@ -3,6 +3,7 @@
 
 #include "voxcone/accel/hbvh.h"
 #include "voxcone/core/parallel.h"
+#include "voxcone/image/metrics.h"
 #include "voxcone/integrator/integrator.h"
 
 #include "test_scenes.h"
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include <string>
+#include <vector>
 
 namespace voxcone::test {
 
@@ -65,6 +67,21 @@ inline CornellMeans cornellBoxMeans(const std::string& method, const nlohmann::j
   s.spp = 16;
   m.method = imageMean(renderWith(scene, method, s, options).image);
   return m;
+}
+
+/// Each 4 x 4 cell's mean luminance (Rec. 709), voxcone's default render over path's at
+/// `pathSpp` (both at the scene's own resolution, voxcone at its spp; path's seed apart from
+/// voxcone's), row-major from the top.
+inline std::vector<double> cellRatiosAgainstPath(const Scene& scene, int pathSpp = 64) {
+  RenderSettings p = scene.render;
+  p.spp = pathSpp;
+  p.seed = 1234;
+  const Image path = renderWith(scene, "path", p).image;
+  const Image vc = renderWith(scene, "voxcone", scene.render).image;
+  const auto luminance = [](const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; };
+  std::vector<double> ratios;
+  for (const RegionError& c : regionErrors(vc, path, 4)) ratios.push_back(luminance(c.meanTest) / luminance(c.meanReference));
+  return ratios;
 }
 
 }  // namespace voxcone::test

@@ -18,25 +18,11 @@ namespace voxcone {
 namespace {
 
 using test::imageMean;
+using test::cellRatiosAgainstPath;
 using test::renderWith;
 
 Scene failureScene(const std::string& name) {
   return loadScene(test::sourceDir() + "/data/scenes/failure/" + name + ".json");
-}
-
-double luminance(const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; }
-
-/// Each 4 x 4 cell's mean luminance, voxcone's default render over path's at 64 spp (both at the
-/// scene's resolution and spp; path's seed apart from voxcone's), row-major from the top.
-std::vector<double> cellRatios(const Scene& scene) {
-  RenderSettings p = scene.render;
-  p.spp = 64;
-  p.seed = 1234;
-  const Image path = renderWith(scene, "path", p).image;
-  const Image vc = renderWith(scene, "voxcone", scene.render).image;
-  std::vector<double> ratios;
-  for (const RegionError& c : regionErrors(vc, path, 4)) ratios.push_back(luminance(c.meanTest) / luminance(c.meanReference));
-  return ratios;
 }
 
 /// The bound on a cell: the suite's target, 10% from converged path, plus two standard deviations
@@ -45,7 +31,7 @@ std::vector<double> cellRatios(const Scene& scene) {
 constexpr double kCellBound = 0.13;
 
 void expectCellsNearPath(const std::string& name) {
-  const std::vector<double> r = cellRatios(failureScene(name));
+  const std::vector<double> r = cellRatiosAgainstPath(failureScene(name));
   ASSERT_EQ(r.size(), 16u);
   for (size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(r[i], 1.0, kCellBound) << name << " cell " << i % 4 << ", " << i / 4;
 }

@@ -5,8 +5,12 @@
 /// tracing, Jensen 2001 photon maps).
 ///
 /// prepare(): photons are traced from the lights (global and, when a delta material exists,
-/// caustic map), the scene is voxelized at `level`, the photons are injected (all of them into
-/// the main grid, caustic ones also into a finer caustic grid) and the mips are built.
+/// caustic map), as many as put `photon_target` of them in the cells the camera's gathers read
+/// (SeenRegion: a pilot pass of 10k, then the count its share needs; stats seen_photons), the
+/// scene is voxelized at `level`, the photons are injected and the mips are built. With the
+/// default `gather` = "hit" the global photons go into a kd-tree (PhotonRadiance) that cones
+/// read at their exact hits, and the main grid holds only the caustic photons; with "march" it
+/// holds all of them (and the caustic ones also go into a finer caustic grid).
 ///
 /// li(): camera rays and specular chains are exact. At a delta surface every lobe is followed
 /// (reflection and refraction, Fresnel-weighted; branches below 1e-3 of the pixel are cut) up
@@ -14,7 +18,10 @@
 ///  - direct light: `light_samples` shadow rays to the lights (area lights sampled);
 ///  - diffuse surfaces: caustics from the caustic grid at the point, plus indirect light from
 ///    the cone set (cone_set.h) over the hemisphere on the viewer's side, each cone weighted by
-///    f(wo, axis) * pi * w_i (albedo * w_i for Lambertian);
+///    f(wo, axis) * pi * w_i (albedo * w_i for Lambertian). By default ("hit") each cone is one
+///    exact HBVH ray along its axis and the radiance at its hit is the photons' estimate there
+///    (PhotonRadiance: the k nearest photons on that surface, on the side the ray hit, in sight
+///    of the hit): no voxel is shared with another surface, so no light crosses a wall;
 ///  - glossy surfaces: one cone along a BSDF-sampled direction, weight f cos / pdf, whose
 ///    half-angle is atan(roughness).
 ///
@@ -54,14 +61,24 @@
 ///
 /// Options (unknown keys are SettingsErrors):
 ///  - `level` [1, 12] (default 5), `coarsest_level` [0, level] (default 1);
-///  - `photons`, `caustic_photons` (default the scene's render.photons / caustic_photons, else
-///    kVoxconeDefaultPhotons (10k) and kVoxconeDefaultCausticPhotons (20k)),
-///    `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
+///  - `photons`, `caustic_photons`: fixed counts (default: the scene's render.photons /
+///    caustic_photons; without either, `photon_target` decides the global count and the caustic
+///    count is kVoxconeDefaultCausticPhotons (20k));
+///  - `photon_target` (default 100000; 0: off, then kVoxconeDefaultPhotons (10k)): global
+///    photons wanted in the cells the camera's gathers read; `max_photons` (default 2M) caps the
+///    count that takes (a scene whose seen part gets a tiny share of the light: the sidecar's
+///    stats say what was seen: seen_cells, seen_photons);
+///  - `caustic_level` (0: none; default level + 1 up to 12 when a delta material exists),
 ///    `kernel_sigma` (photon footprint, finest voxels, default 0.75), `seed` (added to the
 ///    render seed for the photon pass), `mip_filter` (`box`, default, or `gaussian`);
-///  - `cones` [1, 256] (default 6), `cone_angle` (half-angle in degrees, default from the
-///    count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1), `max_distance` (world units,
-///    default: the scene's bounding-sphere diameter);
+///  - `cones` [1, 256] (default 32 with gather = hit, 6 with march), `cone_angle` (half-angle
+///    in degrees, default from the count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1),
+///    `max_distance` (world units, default: the scene's bounding-sphere diameter);
+///  - `hit_radiance`: what a hit cone reads at its hit: "photons" (default; PhotonRadiance) or
+///    "field" (the field's voxels there at the cone's width: faster to build, but a voxel holds
+///    both faces of a wall thinner than it, and light crosses: tests show it); `hit_photons`
+///    (k, default 32), `hit_radius` (largest search radius, world units, default a tenth of the
+///    scene's bounding radius);
 ///  - `light_samples` (shadow rays per shading point, default 1);
 ///  - `gathers`: how many of a gathering pixel's samples gather indirect light by cones (default
 ///    1; 0: every one).
@@ -80,18 +97,18 @@
 ///    taken, liSplit's DeferredGather); the filter fills the others, and any pixel it cannot
 ///    fill gathers itself;
 ///  - `exact_segment` (finest voxels, 0 = off, default 32);
-///  - `gather`: "march" (default, the cone marching above) or "hit": one exact HBVH ray per
-///    cone axis, and the field's radiance at its hit filtered at the cone's width there (a
-///    lookup of voxel size t tan(theta), half of it towards the ray's side, seen along the axis).
-///    About 10x faster than marching on cornell-box, but a cone whose axis misses a surface
-///    counts none of it (one that hits counts all of it), and the lookup at the hit reaches
-///    through thin walls (it leaks like unmitigated marching): tests show both;
+///  - `gather`: "hit" (default): one exact HBVH ray per cone axis, the radiance at its hit as
+///    `hit_radiance` says (a cone whose axis misses a surface counts none of it, one that hits
+///    counts all of it: 32 cones make that noise small); or "march", the cone marching above
+///    through the mips (6 cones; its light leaks through walls thinner than a voxel beyond the
+///    exact segment);
 ///  - `view`: "full" (default), or one term alone for error studies: "direct" (emission and
 ///    shadow rays), "indirect" (cones), "caustic" (caustic grid), "field" (the main grid's
 ///    radiance at the first non-delta hit: what cones see there);
 ///  - `field`: a .vdb from `voxcone voxelize -o` to render with instead of tracing photons and
 ///    voxelizing (VoxelField::read; it fixes level, coarsest_level, caustic_level,
-///    kernel_sigma, mip_filter and the photons, which may not be given with it);
+///    kernel_sigma, mip_filter and the photons, which may not be given with it) a field read back
+///    has no photons, so its hit cones read the field: hit_radiance = field);
 ///  - `memory_budget_mb`: refuse a level whose estimated memory exceeds it (default the
 ///    machine's available memory, 0 none; VoxelSettings::memoryBudgetBytes).
 /// Deterministic: the photon pass and the field are identical at any thread count, and li()
