@@ -32,6 +32,7 @@ nlohmann::json VoxelConeIntegrator::statsJson() const {
   nlohmann::json j = m_stats;
   j["field_bytes"] = m_field.memoryBytes();
   j["hit_photon_bytes"] = m_hitPhotons.memoryBytes();
+  j["hit_cache_entries"] = m_hitPhotons.cacheSize();
   for (int level : m_field.levels()) j["active_voxels"][std::to_string(level)] = m_field.activeVoxels(level);
   return j;
 }
