@@ -18,13 +18,14 @@
 ///    between them, however thin, stops it).
 /// A closed room that no photon enters therefore estimates exactly zero.
 ///
-/// Precomputed irradiance (Christensen 1999, "Faster Photon Map Global Illumination"): the
-/// estimate above costs a k-nearest search, up to k visibility rays and the disc's coverage
-/// probes, and every cone of a gather asked for one (70% of a render's time on the failure
-/// suite). So it is computed once at every `cacheStride`-th photon, on that photon's side, and
-/// a point takes the nearest such entry that passes the same filters (its side, its tangent
-/// plane, in sight: one ray); where none does (a room no photon reached) the full estimate
-/// runs.
+/// Precomputed irradiance (Christensen 1999, "Faster Photon Map Global Illumination"), an
+/// option: the estimate above costs a k-nearest search, up to k visibility rays and the disc's
+/// coverage probes, and every cone of a gather asks for one (70% of a render's time on the
+/// failure suite). With `cacheStride` it is computed once at every cacheStride-th photon, on
+/// that photon's side, and a point takes the nearest such entry that passes the same filters
+/// (its side, its tangent plane, in sight: one ray); where none does (a room no photon reached)
+/// the full estimate runs. 4x faster gathers, but biased low (the nearest entry is more often an
+/// isolated one: -3.5% at k = 32 on a uniform floor).
 
 #include "voxcone/core/math.h"
 #include "voxcone/photon/photon_kdtree.h"
@@ -47,7 +48,7 @@ struct PhotonRadianceSettings {
   float maxRadius = 1.0f;
   /// Irradiance precomputed at every cacheStride-th photon (0: none, every point estimates in
   /// full).
-  int cacheStride = 8;
+  int cacheStride = 0;
 };
 
 /// Photon density estimates at surface points with the filters above. Immutable after

@@ -36,11 +36,14 @@ constexpr int kDefaultMarchCones = 6;
 /// largest search radius as a fraction of the scene's bounding-sphere radius.
 constexpr int kDefaultHitPhotons = 32;
 constexpr double kDefaultHitRadius = 0.1;
-/// Irradiance precomputed at every 8th photon (PhotonRadiance, Christensen 1999). Measured
-/// (256x256, 2 threads, small-objects): every 4th / 8th / 16th photon prepared in 1.35 / 0.94 /
-/// 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther entries pass the filters less often, and
-/// the full estimate runs); none, 0.43 and 3.05 s.
-constexpr int kDefaultHitCacheStride = 8;
+/// Irradiance precomputed at every N-th photon (PhotonRadiance, Christensen 1999): off by default.
+/// Measured (256x256, 2 threads, small-objects): every 4th / 8th / 16th photon prepared in 1.35 /
+/// 0.94 / 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther entries pass the filters less
+/// often, and the full estimate runs); none, 0.43 and 3.05 s: small-objects at 2.96x path's
+/// speed instead of 1.8x. But the nearest entry is biased low (-3.5% on a uniform floor at
+/// k = 32), and on a held-out two-rooms scene (make_failure_scenes.py --variant 2) the floor
+/// by the wall came out 0.881 of path with it, 0.938 without.
+constexpr int kDefaultHitCacheStride = 0;
 /// Photons in the cells the camera's gathers read (VoxelConeSettings::photonTarget), and the most
 /// photons emitted to get them.
 constexpr int kDefaultPhotonTarget = 100000;
