@@ -17,8 +17,8 @@
 namespace voxcone {
 namespace {
 
-using test::imageMean;
 using test::cellRatiosAgainstPath;
+using test::imageMean;
 using test::renderWith;
 
 Scene failureScene(const std::string& name) {
