@@ -32,18 +32,23 @@ constexpr int kDefaultGatherSpacing = 4;
 /// estimate at its hit; with "march", 6 marched cones (their defaults' measurements above).
 constexpr int kDefaultHitCones = 32;
 constexpr int kDefaultMarchCones = 6;
+/// Cones per gather at a hit behind mirrors and glass: such a pixel gathers itself (the filter
+/// cannot fill it), so 32 cones there made the glass dragon 13.6 s (11.1 s of it its samples).
+constexpr int kDefaultChainCones = 8;
 /// The photon estimate at a cone's exact hit (PhotonRadiance): photons per estimate, and the
 /// largest search radius as a fraction of the scene's bounding-sphere radius.
 constexpr int kDefaultHitPhotons = 32;
 constexpr double kDefaultHitRadius = 0.1;
-/// Irradiance precomputed at every N-th photon (PhotonRadiance, Christensen 1999): off by default.
-/// Measured (256x256, 2 threads, small-objects): every 4th / 8th / 16th photon prepared in 1.35 /
-/// 0.94 / 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther entries pass the filters less
-/// often, and the full estimate runs); none, 0.43 and 3.05 s: small-objects at 2.96x path's
-/// speed instead of 1.8x. But the nearest entry is biased low (-3.5% on a uniform floor at
-/// k = 32), and on a held-out two-rooms scene (make_failure_scenes.py --variant 2) the floor
-/// by the wall came out 0.881 of path with it, 0.938 without.
-constexpr int kDefaultHitCacheStride = 0;
+/// Irradiance precomputed at every 8th photon (PhotonRadiance, Christensen 1999) in scenes with
+/// mirrors or glass, where pixels seen through them gather at every pixel (the filter cannot
+/// fill them); none elsewhere. Measured (256x256, 2 threads): small-objects with every 4th / 8th
+/// / 16th photon prepared in 1.35 / 0.94 / 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther
+/// entries pass the filters less often, and the full estimate runs), without 0.43 and 3.05 s;
+/// the glass dragon 7.99 -> 3.98 s at the same 33.5 dB. But the nearest entry is biased low
+/// (-3.5% on a uniform floor at k = 32), and on a held-out two-rooms scene
+/// (make_failure_scenes.py --variant 2) the floor by the wall came out 0.881 of path with it,
+/// 0.938 without: so not where every gather can wait for the filter.
+constexpr int kDefaultHitCacheStride = 8;
 /// Photons in the cells the camera's gathers read (VoxelConeSettings::photonTarget), and the most
 /// photons emitted to get them.
 constexpr int kDefaultPhotonTarget = 100000;
@@ -104,6 +109,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
 
   out.hitGather = r.choice("gather", {"hit", "march"}) == "hit";
   out.cones = r.integer("cones", out.hitGather ? kDefaultHitCones : kDefaultMarchCones, 1, 256);
+  out.chainCones = r.integer("chain_cones", out.hitGather ? kDefaultChainCones : out.cones, 1, 256);
   out.coneAngleDeg = r.number("cone_angle", 0.0, 0.0, 89.0);
   out.coneStep = float(r.number("cone_step", 1.0, 0.25, 4.0));
   const float sceneRadius = std::max(0.0f, scene.boundingSphere().radius);
@@ -121,7 +127,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
     throw SettingsError("voxcone.hit_radiance: a field read back (voxcone.field) has no photons; give \"field\" or nothing");
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
-  out.hitEstimate.cacheStride = r.integer("hit_cache", kDefaultHitCacheStride, 0, 4096);
+  out.hitEstimate.cacheStride = r.integer("hit_cache", anyDelta ? kDefaultHitCacheStride : 0, 0, 4096);
   const std::string view = r.choice("view", viewNames());
   out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
   r.finish();
@@ -141,6 +147,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"caustic_photons", photons.causticPhotons},
           {"photon_seed", photons.seed},
           {"cones", cones},
+          {"chain_cones", chainCones},
           {"cone_angle", coneAngleDeg},
           {"cone_step", coneStep},
           {"max_distance", maxDistance},

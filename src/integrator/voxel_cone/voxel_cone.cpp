@@ -20,7 +20,9 @@ namespace voxcone {
 
 VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
     : m_scene(c.scene), m_accel(c.accel), m_settings(VoxelConeSettings::fromOptions(c.options, c.scene, c.settings)),
-      m_cones(m_settings.cones, float(m_settings.coneAngleDeg * kPi / 180.0)), m_tanHalf(std::tan(m_cones.halfAngle())) {}
+      m_cones(m_settings.cones, float(m_settings.coneAngleDeg * kPi / 180.0)), m_tanHalf(std::tan(m_cones.halfAngle())),
+      m_chainCones(m_settings.chainCones, float(m_settings.coneAngleDeg * kPi / 180.0)),
+      m_chainTanHalf(std::tan(m_chainCones.halfAngle())) {}
 
 nlohmann::json VoxelConeIntegrator::settingsJson() const {
   nlohmann::json j = m_settings.toJson();
@@ -137,7 +139,9 @@ void VoxelConeIntegrator::startTracer() {
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
 }
 
-Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u) const {
+Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain) const {
+  const ConeSet& cones = chain ? m_chainCones : m_cones;
+  const float tanHalf = chain ? m_chainTanHalf : m_tanHalf;
   const Material& mat = m_scene.materials[sh.material];
   const Vec3 ng = glm::dot(sh.geomNormal, woWorld) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
   const Frame frame(sh.shadingNormal);
@@ -148,12 +152,12 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
   const float cr = std::cos(rotation), sr = std::sin(rotation);
   const Frame geo(ng);
   Vec3 indirect(0.0f);
-  for (const Cone& cone : m_cones.cones()) {
+  for (const Cone& cone : cones.cones()) {
     const Vec3 d =
         geo.toWorld(Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
     const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
     if (isBlack(f)) continue;
-    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, m_tanHalf);
+    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf);
   }
   return indirect;
 }
@@ -161,7 +165,7 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
 Vec3 VoxelConeIntegrator::gatherDeferred(const DeferredGather& g) const { return gatherDiffuse(g.hit, g.wo, g.u); }
 
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split,
-                                 RadianceTerms* terms, const Vec3& weight) const {
+                                 RadianceTerms* terms, const Vec3& weight, int depth) const {
   const Material& mat = m_scene.materials[sh.material];
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in ConeTracer::trace).
@@ -215,7 +219,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
       split->gather = {sh, woWorld, u, gatherWeight};
       return result();
     }
-    indirect = gatherWeight * gatherDiffuse(sh, woWorld, u);
+    indirect = gatherWeight * gatherDiffuse(sh, woWorld, u, depth > 0);
     return result();
   }
   if (m_settings.view == View::Caustic || gatherWeight == 0.0f) return result();
@@ -239,7 +243,7 @@ Vec3 VoxelConeIntegrator::trace(const Ray& ray, Sampler& sampler, IndirectSplit*
   return traceDeltaChains(
       m_scene, m_accel, ray, sampler, m_settings.maxDepth, emission,
       [this, split, terms](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int depth, const Vec3& weight) {
-        return shade(sh, wo, px, depth == 0 ? split : nullptr, terms, weight);
+        return shade(sh, wo, px, depth == 0 ? split : nullptr, terms, weight, depth);
       },
       terms);
 }

@@ -34,6 +34,7 @@ struct VoxelConeSettings {
   uint64_t photonTarget = 0;
   uint64_t maxPhotons = 0;
   int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
+  int chainCones = 8;           ///< cones per gather behind mirrors and glass (default 8 with "hit", `cones` with "march")
   double coneAngleDeg = 0.0;    ///< half-angle, degrees; 0: ConeSet's default for the count
   float coneStep = 1.0f;        ///< march step in lookup voxels, [0.25, 4]
   float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter
