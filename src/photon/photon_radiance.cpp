@@ -33,10 +33,6 @@ constexpr float kLift = 0.05f;
 constexpr int kAreaProbes = 8;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
 constexpr int kCacheCandidates = 8;
-/// Of those, how many that pass the filters are averaged: the nearest alone picks isolated
-/// entries (large Voronoi cells, low estimates) more often than crowded ones, -3.5% at k = 32
-/// on a uniform floor; averaging 4 measured the same (-3.4%) for up to 4 rays.
-constexpr int kCacheUsed = 1;
 
 /// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
 float pointHash(const Vec3& p) {
@@ -57,14 +53,15 @@ PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const Pho
                                const PhotonRadianceSettings& s)
     : m_scene(&scene), m_accel(&accel), m_settings(s) {
   m_photons.reserve(maps.global.size() + maps.caustic.size());
-  m_photons.insert(m_photons.end(), maps.global.begin(), maps.global.end());
+  for (const Photon& ph : maps.global)
+    if (!s.indirectOnly || ph.bounces > 0) m_photons.push_back(ph);
   m_photons.insert(m_photons.end(), maps.caustic.begin(), maps.caustic.end());
   std::vector<Vec3> positions(m_photons.size());
   for (size_t i = 0; i < m_photons.size(); ++i) positions[i] = m_photons[i].position;
   m_tree = PhotonKdTree(positions);
-  if (s.cacheStride <= 0) return;
-  // Every cacheStride-th photon on a diffuse surface, estimated on its own side; each entry
-  // alone, so the cache is the same at any thread count.
+  if (s.cacheStride <= 1) return;
+  // Every cacheStride-th photon on a diffuse surface, estimated on its own side from the other
+  // photons only; each entry alone, so the cache is the same at any thread count.
   std::vector<uint32_t> at;
   for (size_t i = 0; i < m_photons.size(); i += size_t(s.cacheStride))
     if (!isBlack(m_photons[i].albedo)) at.push_back(uint32_t(i));
@@ -74,7 +71,7 @@ PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const Pho
     CacheEntry& c = m_cache[e];
     c.position = ph.position;
     c.normal = ph.normal;
-    c.irradiance = irradianceAt(ph.position, Vec3(0.0f), ph.normal, &c.radius, at[e]);
+    c.irradiance = irradianceAt(ph.position, Vec3(0.0f), ph.normal, &c.radius, s.cacheStride);
   });
   std::vector<Vec3> cachePositions(m_cache.size());
   for (size_t e = 0; e < m_cache.size(); ++e) cachePositions[e] = m_cache[e].position;
@@ -121,14 +118,33 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
 }
 
 Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius,
-                                   uint32_t self) const {
+                                   int skipStride) const {
   thread_local std::vector<KdNeighbor> neighbors;
   const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;
+  const int k = m_settings.k;
   if (radius) *radius = 0.0f;
-  const size_t found = m_tree.knn(x, m_settings.k, maxDist2, neighbors);
-  if (found == 0) return Vec3(0.0f);
+  // The photons that estimate: all, or (skipStride > 1) those whose index is not a multiple of
+  // it, the k nearest of them found by asking for enough more than k.
+  const auto counts = [skipStride](uint32_t index) {
+    return skipStride <= 1 || index % uint32_t(skipStride) != 0;
+  };
+  int asked = skipStride > 1 ? k + k / (skipStride - 1) + 4 : k;
+  size_t found = 0, usable = 0;
+  for (;;) {
+    found = m_tree.knn(x, asked, maxDist2, neighbors);
+    usable = 0;
+    size_t last = 0;
+    for (size_t i = 0; i < found && usable < size_t(k); ++i)
+      if (counts(neighbors[i].index)) ++usable, last = i;
+    if (usable == size_t(k) || found < size_t(asked)) {
+      neighbors.resize(usable == size_t(k) ? last + 1 : found);
+      break;
+    }
+    asked *= 2;
+  }
+  if (usable == 0) return Vec3(0.0f);
   // The disc: out to the k-th photon, or the largest radius where fewer lie inside it.
-  const float r2 = found == size_t(m_settings.k) ? neighbors.back().dist2 : maxDist2;
+  const float r2 = usable == size_t(k) ? neighbors.back().dist2 : maxDist2;
   if (!(r2 > 0.0f)) return Vec3(0.0f);
   const float r = std::sqrt(r2);
   if (radius) *radius = r;
@@ -137,13 +153,10 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
   // With k found, the k-th photon only marks the radius: (k - 1) / (pi r_k^2) is the unbiased
   // density of a uniform process, k / (pi r_k^2) is k / (k - 1) too high (Jensen's estimate
   // counts it; at k = 32 the hall came out 3% brighter).
-  // At a photon (self) the others are a uniform process of the same density around it (the
-  // Palm distribution), so it is left out and one fewer counts: counting it was (k - 1) / (k - 2)
-  // too bright.
-  const size_t counted = found == size_t(m_settings.k) && found > 1 ? found - 1 : found;
+  const size_t counted = usable == size_t(k) && k > 1 ? neighbors.size() - 1 : neighbors.size();
   Vec3 sum(0.0f);
   for (size_t i = 0; i < counted; ++i) {
-    if (neighbors[i].index == self) continue;
+    if (!counts(neighbors[i].index)) continue;
     const Photon& ph = m_photons[neighbors[i].index];
     if (glm::dot(ph.normal, side) <= kSameSurfaceCos) continue;
     if (std::abs(glm::dot(ph.position - x, side)) > kPlaneSlab * r) continue;
@@ -155,6 +168,8 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
     if (m_accel->occluded(ray)) continue;
     sum += ph.power;
   }
+  // Left-out photons carry their share of the flux: the rest stand for all of it.
+  if (skipStride > 1) sum *= float(skipStride) / float(skipStride - 1);
   if (isBlack(sum)) return sum;
   // Jensen eq. 7.6 before the BSDF, E = sum Phi / (pi r^2), over the part of the disc that is
   // this surface in sight of the point: at a corner or an edge half the disc is not (a wall, a
@@ -167,11 +182,9 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
   thread_local std::vector<KdNeighbor> near;
   const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;
   m_cacheTree.knn(x, kCacheCandidates, maxDist2, near);
-  // The nearest kCacheUsed entries that pass the filters (on x's side and tangent plane,
-  // nothing standing between), averaged. (Asking also that the entry's own disc reach x kept
-  // the entries of large discs, low estimates: -13% at k = 8.)
-  Vec3 sum(0.0f);
-  int used = 0;
+  // The nearest entry that passes the filters (on x's side and tangent plane, nothing standing
+  // between). (Asking also that the entry's own disc reach x kept the entries of large discs,
+  // low estimates: -13% at k = 8.)
   for (const KdNeighbor& n : near) {
     const CacheEntry& c = m_cache[n.index];
     if (!(c.radius > 0.0f)) continue;
@@ -184,13 +197,10 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
     ray.dir = c.position + c.normal * lift - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
-    sum += c.irradiance;
-    ++used;
-    if (used == kCacheUsed) break;
+    out = c.irradiance;
+    return true;
   }
-  if (used == 0) return false;
-  out = sum / float(used);
-  return true;
+  return false;
 }
 
 Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {

@@ -81,9 +81,9 @@ bool SeenRegion::contains(const Vec3& worldPos) const {
   return std::binary_search(m_keys.begin(), m_keys.end(), keyOf(worldPos));
 }
 
-uint64_t SeenRegion::count(const std::vector<Photon>& photons) const {
+uint64_t SeenRegion::count(const std::vector<Photon>& photons, int minBounces) const {
   uint64_t n = 0;
-  for (const Photon& p : photons) n += contains(p.position) ? 1 : 0;
+  for (const Photon& p : photons) n += p.bounces >= minBounces && contains(p.position) ? 1 : 0;
   return n;
 }
 

@@ -24,8 +24,11 @@
 /// failure suite). With `cacheStride` it is computed once at every cacheStride-th photon, on
 /// that photon's side, and a point takes the nearest such entry that passes the same filters
 /// (its side, its tangent plane, in sight: one ray); where none does (a room no photon reached)
-/// the full estimate runs. 4x faster gathers, but biased low (the nearest entry is more often an
-/// isolated one: -3.5% at k = 32 on a uniform floor).
+/// the full estimate runs: 4x faster gathers. An entry is estimated from the other photons only
+/// (those whose index is not a multiple of the stride, carrying the left-out flux): estimated
+/// from all of them, the entries' estimates were correlated with where they lie, and a point
+/// takes an isolated entry (a large Voronoi cell, few photons around, a low estimate) more often
+/// than a crowded one: -3.5% at k = 32 on a uniform floor, -12% at k = 8.
 
 #include "voxcone/core/math.h"
 #include "voxcone/photon/photon_kdtree.h"
@@ -46,9 +49,12 @@ struct PhotonRadianceSettings {
   /// Largest search radius, world units (> 0): where fewer than k photons lie inside it, the
   /// disc is this one.
   float maxRadius = 1.0f;
-  /// Irradiance precomputed at every cacheStride-th photon (0: none, every point estimates in
-  /// full).
+  /// Irradiance precomputed at every cacheStride-th photon (0 or 1: none, every point estimates
+  /// in full).
   int cacheStride = 0;
+  /// Leave out the global photons straight from a light (bounces 0): the estimate is then the
+  /// light that bounced at least once, for callers that take direct light by shadow rays.
+  bool indirectOnly = false;
 };
 
 /// Photon density estimates at surface points with the filters above. Immutable after
@@ -79,10 +85,11 @@ private:
   float coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r, float lift) const;
   /// Incident irradiance (W / m^2 per channel) at surface point x (rounding error xError) on
   /// side `side`: the k nearest photons that pass the filters over the covered disc, whose
-  /// radius goes to `radius`. At a photon's own position (`self`, its index) that photon is
-  /// left out: the others are what estimates the density there.
+  /// radius goes to `radius`. With skipStride > 1 the photons whose index is a multiple of it
+  /// (the cache's) are left out and the others carry their flux: an entry's estimate is then
+  /// independent of where the entries lie.
   Vec3 irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius = nullptr,
-                    uint32_t self = ~uint32_t(0)) const;
+                    int skipStride = 0) const;
   /// The precomputed irradiance for x on side `side`: the nearest entry that passes the filters,
   /// or false.
   bool cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const;

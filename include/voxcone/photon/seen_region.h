@@ -30,8 +30,8 @@ public:
              int raysY = 64, int gathers = 16);
   /// Whether worldPos lies in a seen cell.
   bool contains(const Vec3& worldPos) const;
-  /// Photons of `photons` in seen cells.
-  uint64_t count(const std::vector<Photon>& photons) const;
+  /// Photons of `photons` in seen cells that bounced at least `minBounces` times.
+  uint64_t count(const std::vector<Photon>& photons, int minBounces = 0) const;
   size_t cells() const { return m_keys.size(); }
   float cellSize() const { return m_cellSize; }
 

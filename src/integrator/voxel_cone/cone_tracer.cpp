@@ -17,9 +17,9 @@ namespace voxcone {
 
 ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& s,
                        const PhotonRadiance* photons)
-    : m_scene(scene), m_accel(accel), m_field(field), m_photons(photons && !photons->empty() ? photons : nullptr),
-      m_coneStep(s.coneStep), m_maxDistance(s.maxDistance),
-      m_exactSegment(s.exactSegment), m_hitGather(s.hitGather) {
+    : m_scene(scene), m_accel(accel), m_field(field), m_photons(s.hitPhotons ? photons : nullptr),
+      m_coneStep(s.coneStep), m_maxDistance(s.maxDistance), m_exactSegment(s.exactSegment),
+      m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect) {
   const std::vector<int> levels = m_field.levels();
   if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
   m_finest = levels.front();
@@ -54,13 +54,31 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
   return out;
 }
 
-Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v) const {
-  if (m_photons) return m_photons->radiance(hit.surface, hit.side);
+Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const {
+  if (m_photons) {
+    Vec3 L = m_photons->radiance(hit.surface, hit.side);
+    if (m_hitDirect && m_scene.materials[hit.surface.material].isDiffuse()) L += directLight(hit.surface, -d, lightU);
+    return L;
+  }
   return m_field.coneSample(hit.surface.position + hit.side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
       .radiance;
 }
 
-Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const {
+Vec3 ConeTracer::directLight(const SurfaceHit& sh, const Vec3& woWorld, const Vec2& u) const {
+  const Material& mat = m_scene.materials[sh.material];
+  const LightSample ls = m_scene.sampleLight(sh.position, u);
+  if (!(ls.pdf > 0.0f)) return Vec3(0.0f);
+  const Frame frame(sh.shadingNormal);
+  const Vec3 wi = frame.toLocal(ls.wi);
+  const Vec3 f = bsdfEval(mat, frame.toLocal(woWorld), wi) * std::fabs(wi.z);
+  if (isBlack(f)) return Vec3(0.0f);
+  if (m_accel.occluded(spawnRayTo(sh.position, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal)))
+    return Vec3(0.0f);
+  return f * ls.radiance / ls.pdf;
+}
+
+Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,
+                                  int depth) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   const Material& m = m_scene.materials[sh.material];
   const Frame frame(sh.shadingNormal);
@@ -71,13 +89,13 @@ Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tan
     if (maxComponent(lobes[i].weight) < kSpecularCut) continue;
     const Vec3 wi = frame.toWorld(lobes[i].wi);
     const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
-    L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, depth + 1);
+    L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, lightU, depth + 1);
   }
   return L;
 }
 
 Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
-                       int depth) const {
+                       const Vec2& lightU, int depth) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -98,8 +116,9 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
-    if (m_scene.materials[hit->surface.material].isDelta()) return continueSpecular(hit->surface, d, tanHalf, depth);
-    return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax));
+    if (m_scene.materials[hit->surface.material].isDelta())
+      return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
+    return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU);
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
@@ -108,9 +127,9 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
       // A mirror or glass passes on what its exact reflected and refracted cones gather;
       // elsewhere the finest level around the hit, half a voxel towards the ray's side.
       if (m_scene.materials[hit->surface.material].isDelta())
-        hitLight = continueSpecular(hit->surface, d, tanHalf, depth);
+        hitLight = continueSpecular(hit->surface, d, tanHalf, lightU, depth);
       else
-        hitLight = hitRadiance(*hit, d, apex, m_v0);
+        hitLight = hitRadiance(*hit, d, apex, m_v0, lightU);
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);

@@ -39,19 +39,21 @@ constexpr int kDefaultChainCones = 8;
 /// largest search radius as a fraction of the scene's bounding-sphere radius.
 constexpr int kDefaultHitPhotons = 32;
 constexpr double kDefaultHitRadius = 0.1;
-/// Irradiance precomputed at every 8th photon (PhotonRadiance, Christensen 1999) in scenes with
-/// mirrors or glass, where pixels seen through them gather at every pixel (the filter cannot
-/// fill them); none elsewhere. Measured (256x256, 2 threads): small-objects with every 4th / 8th
-/// / 16th photon prepared in 1.35 / 0.94 / 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther
-/// entries pass the filters less often, and the full estimate runs), without 0.43 and 3.05 s;
-/// the glass dragon 7.99 -> 3.98 s at the same 33.5 dB. But the nearest entry is biased low
-/// (-3.5% on a uniform floor at k = 32), and on a held-out two-rooms scene
-/// (make_failure_scenes.py --variant 2) the floor by the wall came out 0.881 of path with it,
-/// 0.938 without: so not where every gather can wait for the filter.
+/// Irradiance precomputed at every 8th photon (PhotonRadiance, Christensen 1999). Measured
+/// (256x256, 2 threads): small-objects with every 4th / 8th / 16th photon prepared in 1.35 /
+/// 0.94 / 0.62 s and gathered in 0.49 / 0.70 / 1.02 s (farther entries pass the filters less
+/// often, and the full estimate runs), without 0.43 and 3.05 s; the glass dragon 7.99 -> 3.98 s
+/// at the same 33.5 dB. (While an entry's estimate counted the other entries' photons it was
+/// biased low, -3.5% on a uniform floor, and a held-out two-rooms floor came out 0.881 of path
+/// with it, 0.938 without; estimated from the other photons only, 0.976 with it.)
 constexpr int kDefaultHitCacheStride = 8;
-/// Photons in the cells the camera's gathers read (VoxelConeSettings::photonTarget), and the most
-/// photons emitted to get them.
-constexpr int kDefaultPhotonTarget = 100000;
+/// Photons in the cells the camera's gathers read (VoxelConeSettings::photonTarget: with direct
+/// light at the cones' hits by shadow rays, photons that bounced), and the most photons emitted
+/// to get them. At 100k a 4x4 cell of two-rooms-door moved by up to 7% from seed to seed
+/// (0.927-1.048 of path over four seeds), at 250k by up to 2.5%; 200k put every cell of the
+/// suite, its held-out variants and the Cornell scenes within 4.4% (one seed), at 0.3-0.9 s more
+/// per render than 100k.
+constexpr int kDefaultPhotonTarget = 200000;
 constexpr int kDefaultMaxPhotons = 2000000;
 }  // namespace
 
@@ -125,9 +127,11 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   out.hitPhotons = r.choice("hit_radiance", {"photons", "field"}) == "photons" && out.fieldPath.empty();
   if (!out.fieldPath.empty() && r.has("hit_radiance") && options["hit_radiance"] == "photons")
     throw SettingsError("voxcone.hit_radiance: a field read back (voxcone.field) has no photons; give \"field\" or nothing");
+  out.hitDirect = r.choice("hit_direct", {"rays", "photons"}) == "rays";
+  out.hitEstimate.indirectOnly = out.hitPhotons && out.hitDirect;
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
-  out.hitEstimate.cacheStride = r.integer("hit_cache", anyDelta ? kDefaultHitCacheStride : 0, 0, 4096);
+  out.hitEstimate.cacheStride = r.integer("hit_cache", kDefaultHitCacheStride, 0, 4096);
   const std::string view = r.choice("view", viewNames());
   out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
   r.finish();
@@ -158,6 +162,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"exact_segment", exactSegment},
           {"gather", hitGather ? "hit" : "march"},
           {"hit_radiance", hitPhotons ? "photons" : "field"},
+          {"hit_direct", hitDirect ? "rays" : "photons"},
           {"hit_photons", hitEstimate.k},
           {"hit_radius", hitEstimate.maxRadius},
           {"hit_cache", hitEstimate.cacheStride},

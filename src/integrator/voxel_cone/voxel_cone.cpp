@@ -5,6 +5,8 @@
 #include "../delta_chain.h"
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
+#include "voxcone/core/sampler.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/whitted.h"
@@ -15,6 +17,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace voxcone {
 
@@ -55,7 +58,9 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   Timer t;
   const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
   const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
-  uint64_t inSeen = seen.count(maps.global);
+  // The photons the estimates use: with direct light by shadow rays, those that bounced.
+  const int minBounces = m_settings.hitEstimate.indirectOnly ? 1 : 0;
+  uint64_t inSeen = seen.count(maps.global, minBounces);
   m_stats["seen_cells"] = seen.cells();
   m_stats["pilot_photons"] = {{"emitted", maps.stats.emittedGlobal}, {"stored", maps.global.size()}, {"seen", inSeen}};
   if (inSeen < m_settings.photonTarget) {
@@ -67,7 +72,7 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
     more.photons = std::min<uint64_t>(m_settings.maxPhotons, (uint64_t(std::ceil(wanted)) + 1023) / 1024 * 1024);
     if (more.photons > maps.stats.emittedGlobal) {
       maps = tracePhotons(m_scene, m_accel, more, progress);
-      inSeen = seen.count(maps.global);
+      inSeen = seen.count(maps.global, minBounces);
     }
   }
   m_stats["seen_photons"] = inSeen;
@@ -151,13 +156,23 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
   const float rotation = 2.0f * kPi * u;
   const float cr = std::cos(rotation), sr = std::sin(rotation);
   const Frame geo(ng);
+  // The light samples at the cones' hits: a Hammersley set over the cones, shifted by a hash of
+  // u (Cranley-Patterson), so the gather's shadow rays spread over the lights' area.
+  uint32_t uBits;
+  std::memcpy(&uBits, &u, sizeof uBits);
+  const uint64_t key = mixBits(uint64_t(uBits) + 0x9e3779b97f4a7c15ULL);
+  const Vec2 shift(float(key >> 40) * 0x1p-24f, float((key >> 16) & 0xffffffu) * 0x1p-24f);
+  const size_t n = cones.cones().size();
   Vec3 indirect(0.0f);
-  for (const Cone& cone : cones.cones()) {
+  for (size_t i = 0; i < n; ++i) {
+    const Cone& cone = cones.cones()[i];
     const Vec3 d =
         geo.toWorld(Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
     const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
     if (isBlack(f)) continue;
-    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf);
+    Vec2 lightU((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
+    lightU -= glm::floor(lightU);
+    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf, lightU);
   }
   return indirect;
 }
@@ -231,7 +246,8 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   // Roughness is in (0, 1]. Below 0.01 the cone would stay one finest voxel wide for over 100
   // steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
-  indirect = gatherWeight * bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf);
+  const Vec2 lightU = sampler.uniform2();
+  indirect = gatherWeight * bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf, lightU);
   return result();
 }
 

@@ -46,8 +46,10 @@ class ConeTracer {
 public:
   /// Cones in `field` (levels built), exact segments against `accel` on `scene`'s triangles,
   /// with `settings`' step, maximum distance, exact segment and gather mode. Holds references.
-  /// With `photons` (not empty), the radiance at a cone's exact hit on a diffuse surface is
-  /// their estimate there (PhotonRadiance) instead of the field's finest level around it.
+  /// With settings.hitPhotons, the radiance at a cone's exact hit on a diffuse surface is the
+  /// estimate of `photons` there (PhotonRadiance) instead of the field's finest level around
+  /// it, plus, with settings.hitDirect, the hit's direct light by one shadow ray (the photons
+  /// then hold only the light that bounced).
   ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings,
              const PhotonRadiance* photons = nullptr);
   /// The radiance one cone gathers from surface point p (rounding error pError, unit normal n
@@ -55,8 +57,9 @@ public:
   /// atan(tanHalf). Where the axis's exact ray meets a mirror or glass (delta materials), the
   /// cone's light there is what cones along its reflected and refracted directions gather
   /// from the hit, weighted by the lobes (`depth`: specular hits so far, up to
-  /// kMaxSpecularDepth).
-  Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, int depth = 0) const;
+  /// kMaxSpecularDepth). `lightU`: the 2D sample of the light at the hit (hitDirect).
+  Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, const Vec2& lightU,
+             int depth = 0) const;
   float finestVoxel() const { return m_v0; }  ///< world units
   /// Per-axis variance of a cone's cross-section at unit distance along its axis, for
   /// directions uniform over its solid angle (half-angle atan(tanHalf)).
@@ -72,10 +75,12 @@ private:
     Vec3 side{0.0f};
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
-  Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, int depth) const;
+  Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU, int depth) const;
   /// The radiance a cone of direction d (apex `apex`) takes from the surface its exact ray hit
   /// (not a delta one), looked up in the field at voxel size v where there are no photons.
-  Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v) const;
+  Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const;
+  /// Direct light leaving surface point sh towards woWorld: one light sample (u), one shadow ray.
+  Vec3 directLight(const SurfaceHit& sh, const Vec3& woWorld, const Vec2& u) const;
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
                                       float tMax) const;
 
@@ -85,6 +90,7 @@ private:
   const PhotonRadiance* m_photons = nullptr;
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
+  bool m_hitDirect;
   float m_v0 = 0.0f;  ///< finest voxel size
   int m_finest = 0, m_coarsest = 0;
   Bounds3 m_fieldBounds;

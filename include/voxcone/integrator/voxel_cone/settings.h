@@ -48,6 +48,10 @@ struct VoxelConeSettings {
   /// that surface and side in sight of the hit (PhotonRadiance, `hit_radiance` = "photons", the
   /// default) or from the field's finest level around it ("field").
   bool hitPhotons = true;
+  /// With hitPhotons: the direct light at a cone's hit by one shadow ray (`hit_direct` =
+  /// "rays", the default), the photons then only the light that bounced ("photons": all of it
+  /// from the photons).
+  bool hitDirect = true;
   PhotonRadianceSettings hitEstimate;  ///< `hit_photons` (k), `hit_radius` (world units)
   View view = View::Full;
   /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead
