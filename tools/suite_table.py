@@ -16,8 +16,8 @@ ladder, extrapolated); the speed-up is that time over voxcone's.
 --closed A=B: scene A must render black; its mean over scene B's voxcone mean is reported (the
 closed-door room against the open one).
 
-Also reads each voxcone render's sidecar: photons emitted and stored, and the field's active
-voxels per level. Writes OUTDIR/suite.md and OUTDIR/suite.json. Read ratios within one run."""
+Also reads each voxcone render's sidecar (stats.integrator): photons emitted, stored and in the
+seen cells, the precomputed estimates, the field's bytes and active voxels per level. Writes OUTDIR/suite.md and OUTDIR/suite.json. Read ratios within one run."""
 
 import argparse
 import json
@@ -96,8 +96,9 @@ def main():
         seconds, runs = timed(cmd, args.repeat)
         row = {"scene": name, "seconds": seconds, "runs": runs, **compare(args.bin, out, ref, args.regions)}
         with open(os.path.join(args.outdir, name + "-voxcone.json")) as f:
-            stats = json.load(f).get("stats", {})
-        row["photons"] = {k: stats.get(k) for k in ("emitted_global", "stored_global", "emitted_caustic", "stored_caustic")}
+            stats = json.load(f).get("stats", {}).get("integrator", {})
+        row["photons"] = {k: stats.get(k) for k in ("emitted_global", "stored_global", "seen_photons", "emitted_caustic",
+                                                     "stored_caustic", "hit_cache_entries")}
         row["active_voxels"] = stats.get("active_voxels")
         row["field_bytes"] = stats.get("field_bytes")
         if not args.no_path:
