@@ -57,7 +57,8 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
 Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const {
   if (m_photons) {
     Vec3 L = m_photons->radiance(hit.surface, hit.side);
-    if (m_hitDirect && m_scene.materials[hit.surface.material].isDiffuse()) L += directLight(hit.surface, -d, lightU);
+    if (m_hitDirect && m_scene.materials[hit.surface.material].isDiffuse())
+      L += directLight(hit.surface, -d, lightU);
     return L;
   }
   return m_field.coneSample(hit.surface.position + hit.side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
@@ -72,9 +73,9 @@ Vec3 ConeTracer::directLight(const SurfaceHit& sh, const Vec3& woWorld, const Ve
   const Vec3 wi = frame.toLocal(ls.wi);
   const Vec3 f = bsdfEval(mat, frame.toLocal(woWorld), wi) * std::fabs(wi.z);
   if (isBlack(f)) return Vec3(0.0f);
-  if (m_accel.occluded(spawnRayTo(sh.position, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal)))
-    return Vec3(0.0f);
-  return f * ls.radiance / ls.pdf;
+  const Ray shadow =
+      spawnRayTo(sh.position, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
+  return m_accel.occluded(shadow) ? Vec3(0.0f) : f * ls.radiance / ls.pdf;
 }
 
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,
