@@ -119,6 +119,7 @@ struct RayTri4 {
   int kx, ky, kz;
   int axes;  ///< 2 kz + (dir[kz] < 0): the index of kPacketRowBytes
   float sx, sy, sz;
+  float dz;  ///< |d[kz]|, as WatertightRay's
   float org[3];
   explicit RayTri4(const Ray& r) : org{r.origin.x, r.origin.y, r.origin.z} {
     const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
@@ -135,23 +136,24 @@ struct RayTri4 {
     sz = 1.0f / d[kz];
     sx = d[kx] * sz;
     sy = d[ky] * sz;
+    dz = std::fabs(d[kz]);
   }
 };
 
 /// RayTri4 spread over eight lanes, with the byte offsets of the rows its axes select: what the
 /// packet test reads of a ray, made once a ray (the HBVH: at its first leaf), so that a leaf test
-/// loads it rather than broadcasting seven values and scaling three axes (GCC broadcast them once
+/// loads it rather than broadcasting eight values and scaling three axes (GCC broadcast them once
 /// a leaf and spilled them to the stack).
 struct alignas(32) RayTriLanes {
-  enum Row { kOrgX, kOrgY, kOrgZ, kSx, kSy, kSz, kTMin, kRows };
-  float lanes[kRows][8];  ///< origin[kx], origin[ky], origin[kz], sx, sy, sz, tMin
+  enum Row { kOrgX, kOrgY, kOrgZ, kSx, kSy, kSz, kTMin, kDz, kRows };
+  float lanes[kRows][8];  ///< origin[kx], origin[ky], origin[kz], sx, sy, sz, tMin, |d[kz]|
   /// Byte offsets of rows kx, ky, kz in a packet of 4 ([0]) or 8 ([1]) floats a row (a row of
   /// kPacketRowBytes: a table rather than six products a ray).
   const int64_t (*rowBytes)[3];
   explicit RayTriLanes(const Ray& r) {
     const RayTri4 rt(r);
     const int k[3] = {rt.kx, rt.ky, rt.kz};
-    const float v[kRows] = {rt.org[k[0]], rt.org[k[1]], rt.org[k[2]], rt.sx, rt.sy, rt.sz, r.tMin};
+    const float v[kRows] = {rt.org[k[0]], rt.org[k[1]], rt.org[k[2]], rt.sx, rt.sy, rt.sz, r.tMin, rt.dz};
     for (int i = 0; i < kRows; ++i)
       for (int l = 0; l < 8; ++l) lanes[i][l] = v[i];
     rowBytes = kPacketRowBytes.bytes[rt.axes];
@@ -216,7 +218,7 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
     // Only distances above their own rounding error (watertightDistanceError, lane by lane).
     const auto abs = [&](F a) { return andNot(signMask, a); };
     const auto max3 = [&](F a, F b, F c) { return max(abs(a), max(abs(b), abs(c))); };
-    const F maxZ = max3(pz[0], pz[1], pz[2]) * abs(sz);
+    const F maxZ = max3(pz[0], pz[1], pz[2]);
     const F maxX = max3(px[0], px[1], px[2]);
     const F maxY = max3(py[0], py[1], py[2]);
     const F maxE = max3(u, v, w);
@@ -226,7 +228,7 @@ inline int intersectPackets(const float* base, int stride, const Ray& ray, const
     const F deltaY = g5 * (maxY + maxZ);
     const F deltaE = F::broadcast(2.0f) * (g2 * (maxX * maxY) + deltaY * maxX + deltaX * maxY);
     const F deltaT = F::broadcast(3.0f) * (g3 * (maxE * maxZ) + deltaE * maxZ + deltaZ * maxE) * abs(invDet);
-    mask &= (t > deltaT).mask();
+    mask &= (t * rl.get<F>(R::kDz) > deltaT).mask();
     t.store(tOut);
     (v * invDet).store(b1Out);
     (w * invDet).store(b2Out);

@@ -18,21 +18,22 @@ nlohmann::json WhittedIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"light_samples", m_lightSamples}};
 }
 
+Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u) {
+  const LightSample ls = scene.sampleLight(hit.position, u);
+  if (!(ls.pdf > 0.0f)) return Vec3(0.0f);
+  const Frame frame(hit.shadingNormal);
+  const Vec3 wi = frame.toLocal(ls.wi);
+  const Vec3 f = bsdfEval(scene.materials[hit.material], frame.toLocal(woWorld), wi) * std::fabs(wi.z);
+  if (isBlack(f)) return Vec3(0.0f);
+  if (accel.occluded(spawnRayTo(hit.position, hit.positionError, hit.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal)))
+    return Vec3(0.0f);
+  return f * ls.radiance / ls.pdf;
+}
+
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Sampler& sampler,
                          int samples) {
-  const Material& mat = scene.materials[hit.material];
-  const Frame frame(hit.shadingNormal);
-  const Vec3 wo = frame.toLocal(woWorld);
   Vec3 sum(0.0f);
-  for (int i = 0; i < samples; ++i) {
-    const LightSample ls = scene.sampleLight(hit.position, sampler.uniform2());
-    if (!(ls.pdf > 0.0f)) continue;
-    const Vec3 wi = frame.toLocal(ls.wi);
-    const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
-    if (isBlack(f)) continue;
-    if (accel.occluded(spawnRayTo(hit.position, hit.positionError, hit.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal))) continue;
-    sum += f * ls.radiance / ls.pdf;
-  }
+  for (int i = 0; i < samples; ++i) sum += directLightSample(scene, accel, hit, woWorld, sampler.uniform2());
   return sum / static_cast<float>(samples);
 }
 

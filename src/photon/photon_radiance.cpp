@@ -34,22 +34,6 @@ constexpr int kAreaProbes = 8;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
 constexpr int kCacheCandidates = 8;
 
-/// The segment from `from` to `to` (stopping kShadowEpsilon short of it) as a ray of unit
-/// direction. The watertight triangle test's rounding-error bound (PBRT's) takes directions of
-/// about unit length: for a segment of a centimetre given as an unnormalized direction it came
-/// out a third of the segment, and hits within 4 mm of the origin were dropped. A 4 mm wall
-/// between a point and a photon was then not seen (a held-out closed two-rooms scene,
-/// make_failure_scenes.py --variant 3, showed light in the closed room).
-Ray segment(const Vec3& from, const Vec3& to) {
-  const Vec3 d = to - from;
-  const float length = glm::length(d);
-  Ray r;
-  r.origin = from;
-  r.dir = length > 0.0f ? d / length : Vec3(0.0f, 0.0f, 1.0f);
-  r.tMax = (1.0f - kShadowEpsilon) * length;
-  return r;
-}
-
 /// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
 float pointHash(const Vec3& p) {
   uint32_t h = 2166136261u;
@@ -124,7 +108,11 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
     const Vec3 n = glm::dot(under.geomNormal, side) >= 0.0f ? under.geomNormal : -under.geomNormal;
     if (glm::dot(n, side) <= kSameSurfaceCos) continue;
     // In sight of the point, lifted off both surfaces as a photon there would be.
-    if (!m_accel->occluded(segment(from, under.position + n * lift))) ++covered;
+    Ray along;
+    along.origin = from;
+    along.dir = under.position + n * lift - from;
+    along.tMax = 1.0f - kShadowEpsilon;
+    if (!m_accel->occluded(along)) ++covered;
   }
   return float(std::max(covered, 1)) / float(kAreaProbes);
 }
@@ -173,7 +161,11 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
     if (glm::dot(ph.normal, side) <= kSameSurfaceCos) continue;
     if (std::abs(glm::dot(ph.position - x, side)) > kPlaneSlab * r) continue;
     // In sight: nothing between the point and the photon, both lifted off their surfaces.
-    if (m_accel->occluded(segment(from, ph.position + ph.normal * lift))) continue;
+    Ray ray;
+    ray.origin = from;
+    ray.dir = ph.position + ph.normal * lift - from;
+    ray.tMax = 1.0f - kShadowEpsilon;
+    if (m_accel->occluded(ray)) continue;
     sum += ph.power;
   }
   // Left-out photons carry their share of the flux: the rest stand for all of it.
@@ -200,7 +192,11 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
     if (std::abs(glm::dot(c.position - x, side)) > kPlaneSlab * c.radius) continue;
     const float lift = kLift * c.radius;
     const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
-    if (m_accel->occluded(segment(from, c.position + c.normal * lift))) continue;
+    Ray ray;
+    ray.origin = from;
+    ray.dir = c.position + c.normal * lift - from;
+    ray.tMax = 1.0f - kShadowEpsilon;
+    if (m_accel->occluded(ray)) continue;
     out = c.irradiance;
     return true;
   }

@@ -154,7 +154,8 @@ TEST(PhotonRadiance, APhotonInsideAWallDoesNotCountOnItsOtherFace) {
   // from the dark room. Their visibility segments to points on the near face cross it about a
   // millimetre from their start, and the triangle test, handed a segment a centimetre long as an
   // unnormalized direction, bounded its rounding error at a third of the segment and dropped
-  // that hit: the dark room took their light. The segment is now a unit-direction ray.
+  // that hit: the dark room took their light. (The bound is now taken for the direction scaled
+  // to |dir[kz]| = 1: Accel.ShortSegmentsSeeAWallNearTheirStart.)
   const float t = 0.004f, height = 2.728718f, depth = 4.672923f;
   const std::string json = R"({
     "camera": {"position": [-2, 1.5, 0.3], "target": [0, 1, 2], "up": [0, 1, 0], "fov_y_deg": 40},

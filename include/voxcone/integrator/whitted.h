@@ -29,5 +29,7 @@ private:
 /// `samples` shadow rays. wo is the unit direction towards the viewer (world space).
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Sampler& sampler,
                          int samples);
+/// One sample of it: the light sampled at 2D point u, one shadow ray.
+Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, const Vec2& u);
 
 }  // namespace voxcone

@@ -4,6 +4,7 @@
 
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
+#include "voxcone/integrator/whitted.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/photon/photon_radiance.h"
 #include "voxcone/scene/bsdf.h"
@@ -58,24 +59,11 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
   if (m_photons) {
     Vec3 L = m_photons->radiance(hit.surface, hit.side);
     if (m_hitDirect && m_scene.materials[hit.surface.material].isDiffuse())
-      L += directLight(hit.surface, -d, lightU);
+      L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU);
     return L;
   }
   return m_field.coneSample(hit.surface.position + hit.side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
       .radiance;
-}
-
-Vec3 ConeTracer::directLight(const SurfaceHit& sh, const Vec3& woWorld, const Vec2& u) const {
-  const Material& mat = m_scene.materials[sh.material];
-  const LightSample ls = m_scene.sampleLight(sh.position, u);
-  if (!(ls.pdf > 0.0f)) return Vec3(0.0f);
-  const Frame frame(sh.shadingNormal);
-  const Vec3 wi = frame.toLocal(ls.wi);
-  const Vec3 f = bsdfEval(mat, frame.toLocal(woWorld), wi) * std::fabs(wi.z);
-  if (isBlack(f)) return Vec3(0.0f);
-  const Ray shadow =
-      spawnRayTo(sh.position, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
-  return m_accel.occluded(shadow) ? Vec3(0.0f) : f * ls.radiance / ls.pdf;
 }
 
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,

@@ -79,8 +79,6 @@ private:
   /// The radiance a cone of direction d (apex `apex`) takes from the surface its exact ray hit
   /// (not a delta one), looked up in the field at voxel size v where there are no photons.
   Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const;
-  /// Direct light leaving surface point sh towards woWorld: one light sample (u), one shadow ray.
-  Vec3 directLight(const SurfaceHit& sh, const Vec3& woWorld, const Vec2& u) const;
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
                                       float tMax) const;
 
