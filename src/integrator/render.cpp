@@ -168,6 +168,14 @@ public:
     }
   }
 
+  /// Add `v` to `pixel`'s sums of layer `a`, where it is asked for.
+  void addTo(size_t pixel, Aov a, const DVec3& v) {
+    if (!active()) return;
+    for (size_t i = 0; i < m_request->layers.size(); ++i)
+      if (m_request->layers[i] == a)
+        for (int c = 0; c < 3; ++c) sums[pixel * m_channels + m_offsets[i] + size_t(c)] += v[c];
+  }
+
   /// The layers: each sum over `spp` samples; `filtered`, when given, is each pixel's filtered
   /// indirect light, added to the Indirect layer as renderImage adds it to the beauty.
   std::vector<ImageLayer> layers(int spp, const std::vector<Vec3>* filtered = nullptr) const {
@@ -200,13 +208,63 @@ private:
   bool m_firstHit = false, m_terms = false;
 };
 
+/// The pixels that take glint samples (Integrator::glintSamples): those with a probe ray (at the
+/// centres of the pixel's 2 x 2 quarters) whose first surface is a mirror or glass, and their
+/// eight neighbours. The probes are fixed rays, not the camera samples, so which pixels take
+/// glint samples does not depend on those samples (an estimate chosen by its own samples would
+/// be biased).
+std::vector<uint8_t> glintPixels(const Scene& scene, const Integrator& integrator, int w, int h) {
+  std::vector<uint8_t> probe(size_t(w) * size_t(h), 0u), out(probe.size(), 0u);
+  tbb::parallel_for(0, h, [&](int y) {
+    for (int x = 0; x < w; ++x)
+      for (int q = 0; q < 4 && !probe[size_t(y) * size_t(w) + size_t(x)]; ++q) {
+        const float px = float(x) + 0.25f + 0.5f * float(q & 1), py = float(y) + 0.25f + 0.5f * float(q >> 1);
+        if (integrator.seesDelta(scene.camera.generateRay(px, py, w, h))) probe[size_t(y) * size_t(w) + size_t(x)] = 1u;
+      }
+  });
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if (nx >= 0 && ny >= 0 && nx < w && ny < h && probe[size_t(ny) * size_t(w) + size_t(nx)])
+            out[size_t(y) * size_t(w) + size_t(x)] = 1u;
+        }
+  return out;
+}
+
+/// Pixel (x, y)'s glint samples for its camera samples [first, first + count), `perSample` for
+/// each, from a sampler of their own: their sum over perSample (what those camera samples' own
+/// glints would add to the pixel's sum); unusable ones counted in `bad`.
+DVec3 glintSum(const Scene& scene, const Integrator& integrator, const RenderSettings& settings, int x, int y,
+               int perSample, int first, int count, uint64_t& bad) {
+  const int w = settings.width, h = settings.height;
+  const size_t pixel = size_t(y) * size_t(w) + size_t(x);
+  Sampler sampler(settings.sampler, mixBits(settings.seed ^ 0x6c8e9cf570932bd5ULL), pixel,
+                  uint32_t(settings.spp) * uint32_t(perSample));
+  DVec3 sum(0.0);
+  for (uint32_t s = uint32_t(first) * uint32_t(perSample); s < uint32_t(first + count) * uint32_t(perSample); ++s) {
+    sampler.startSample(s);
+    const Vec2 jitter = sampler.uniform2();
+    const Vec3 G = integrator.liGlint(scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h), sampler);
+    if (usableRadiance(G)) sum += DVec3(G);
+    else ++bad;
+  }
+  return sum / double(perSample);
+}
+
 /// One sample's radiance: li, or with AOVs liTerms, whose terms and first hit go into `aovs`
-/// when the estimate is usable.
-Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, AovSums& aovs) {
-  if (!aovs.active()) return integrator.li(ray, sampler);
+/// when the estimate is usable; without its glints where `glints` (glintSum takes them).
+Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, AovSums& aovs,
+                bool glints) {
+  if (!aovs.active() && !glints) return integrator.li(ray, sampler);
   RadianceTerms terms;
-  const Vec3 L = aovs.terms() ? integrator.liTerms(ray, sampler, nullptr, terms) : integrator.li(ray, sampler);
-  if (usableRadiance(L)) aovs.add(pixel, ray, terms);
+  Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, nullptr, terms) : integrator.li(ray, sampler);
+  if (glints) {
+    L -= terms.glint;
+    terms.emitted -= terms.glint;
+  }
+  if (usableRadiance(L) && aovs.active()) aovs.add(pixel, ray, terms);
   return L;
 }
 
@@ -241,8 +299,11 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
   uint64_t invalidComplete = 0;
   std::atomic<bool> cancelled{false};
   const std::vector<int> passes = passSizes(settings.spp);
-  if (progress) progress->start("render", uint64_t(tilesX) * uint64_t(tilesY) * passes.size());
   Timer timer;
+  const int glintPerSample = integrator.glintSamples();
+  const std::vector<uint8_t> glintPixel =
+      glintPerSample > 0 ? glintPixels(scene, integrator, w, h) : std::vector<uint8_t>();
+  if (progress) progress->start("render", uint64_t(tilesX) * uint64_t(tilesY) * passes.size());
   int doneSpp = 0;
   for (const int passSpp : passes) {
     tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
@@ -257,13 +318,19 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
           }
           const size_t pixel = size_t(y) * size_t(w) + size_t(x);
           Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
+          const bool glints = !glintPixel.empty() && glintPixel[pixel];
           for (int s = doneSpp; s < doneSpp + passSpp; ++s) {
             sampler.startSample(static_cast<uint32_t>(s));
             const Vec2 jitter = sampler.uniform2();
             const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
-            const Vec3 L = takeSample(integrator, ray, sampler, pixel, aovs);
+            const Vec3 L = takeSample(integrator, ray, sampler, pixel, aovs, glints);
             if (!usableRadiance(L)) ++bad;
             else sum[pixel] += DVec3(L);
+          }
+          if (glints) {
+            const DVec3 g = glintSum(scene, integrator, settings, x, y, glintPerSample, doneSpp, passSpp, bad);
+            sum[pixel] += g;
+            aovs.addTo(pixel, Aov::Emitted, g);
           }
         }
       invalid += bad;
@@ -392,8 +459,12 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   std::atomic<uint64_t> invalid{0};
   std::atomic<bool> cancelled{false};
   AovSums aovs(scene, aovRequest, size_t(w) * size_t(h));
-  if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
   Timer timer;
+  const int glintPerSample = integrator.glintSamples();
+  const std::vector<uint8_t> glintPixel =
+      glintPerSample > 0 ? glintPixels(scene, integrator, w, h) : std::vector<uint8_t>();
+  if (glintPerSample > 0) result.stageSeconds["glint_probe"] = timer.seconds();
+  if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
   tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
     if (cancelled.load(std::memory_order_relaxed)) return;
     if (progress && progress->cancelled()) {
@@ -418,13 +489,19 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
         bool oneSurface = true;
         IndirectSplit first;
         pixelSamples.clear();
+        // Glints from the glint samples: the camera samples leave theirs out.
+        const bool glints = !glintPixel.empty() && glintPixel[pixel];
         for (int s = 0; s < settings.spp; ++s) {
           sampler.startSample(static_cast<uint32_t>(s));
           const Vec2 jitter = sampler.uniform2();
           const Ray ray = scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, w, h);
           IndirectSplit sp;
           RadianceTerms terms;
-          const Vec3 L = aovs.terms() ? integrator.liTerms(ray, sampler, &sp, terms) : integrator.liSplit(ray, sampler, sp);
+          Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, &sp, terms) : integrator.liSplit(ray, sampler, sp);
+          if (glints) {
+            L -= terms.glint;
+            terms.emitted -= terms.glint;
+          }
           if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
             ++bad;
             oneSurface = false;
@@ -442,6 +519,11 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material});
           if (seen++ == 0) first = sp;
           else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kSameSurfaceCos) oneSurface = false;
+        }
+        if (glints) {
+          const DVec3 g = glintSum(scene, integrator, settings, x, y, glintPerSample, 0, settings.spp, bad);
+          sum += g;
+          aovs.addTo(pixel, Aov::Emitted, g);
         }
         const DVec3 spp(settings.spp);
         // With the filter: all but the split-off indirect light now, that after the filter.

@@ -48,7 +48,7 @@ Vec3 WhittedIntegrator::liTerms(const Ray& ray, Sampler& sampler, IndirectSplit*
     terms.direct += weight * L;
     return L;
   };
-  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, true, direct, &terms);
+  return traceDeltaChains(m_scene, m_accel, ray, sampler, m_maxDepth, m_maxDepth, true, direct, &terms);
 }
 
 }  // namespace voxcone

@@ -183,6 +183,22 @@ TEST(Aov, VoxconeEmittedPlusDirectIsItsDirectView) {
   expectEmittedPlusDirectIs(full, direct.image);
 }
 
+TEST(Aov, VoxconesGlintSamplesKeepTheTermsAddingUp) {
+  // The glint samples replace the camera samples' glints in the beauty and the emitted layer
+  // alike, with the filter and without it.
+  const Scene glass = cornellWithGlassBall(24, 4);
+  const RenderSettings s = smallSettings(glass, 24, 4);
+  for (int filter : {12, 0}) {
+    const nlohmann::json options = {{"glint_samples", 4}, {"filter", filter}, {"photons", 20000}};
+    const RenderResult with = renderAovs(glass, "voxcone", s, options);
+    EXPECT_EQ(with.image.pixels, test::renderWith(glass, "voxcone", s, options).image.pixels) << filter;
+    expectTermsAddUp(with, "glints, filter " + std::to_string(filter));
+    nlohmann::json none = options;
+    none["glint_samples"] = 0;
+    EXPECT_NE(with.image.pixels, test::renderWith(glass, "voxcone", s, none).image.pixels) << filter;
+  }
+}
+
 TEST(Aov, TermLayersNeedAMethodThatSeparatesThem) {
   const Scene scene = test::cornellBox();
   RenderSettings s = smallSettings(scene, 8, 1);

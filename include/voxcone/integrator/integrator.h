@@ -52,6 +52,8 @@ struct IndirectSplit {
 /// indirect: everything else (voxcone: the cones).
 struct RadianceTerms {
   Vec3 emitted{0.0f}, direct{0.0f}, caustic{0.0f}, indirect{0.0f};
+  /// The part of `emitted` seen after one or more mirror or glass bounces (a light's glints).
+  Vec3 glint{0.0f};
 };
 
 /// Estimates the radiance arriving along camera rays. Implementations are immutable while
@@ -91,6 +93,17 @@ public:
   /// its terms added to `terms` (what liSplit splits off stays out of both). Throws Error
   /// unless separatesTerms().
   virtual Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const;
+  /// Extra samples, per camera sample, of the light seen through mirrors and glass (0: none).
+  /// renderImage takes them in the pixels next to a probe ray that met a delta surface
+  /// (seesDelta), from a sampler of their own, and there counts the glints (RadianceTerms::glint)
+  /// from them instead of from the camera samples: a light's image in glass is a small, bright
+  /// target whose pixel integral is most of such a pixel's noise, and costs only the rays of its
+  /// delta chains.
+  virtual int glintSamples() const { return 0; }
+  /// Whether the first surface along `ray` is a mirror or glass (glintSamples' probe).
+  virtual bool seesDelta(const Ray& ray) const { return false; }
+  /// The light seen along `ray` after one or more delta bounces, nothing else (RadianceTerms::glint).
+  virtual Vec3 liGlint(const Ray& ray, Sampler& sampler) const { return Vec3(0.0f); }
   /// Settings as JSON (written into sidecars).
   virtual nlohmann::json settingsJson() const { return nlohmann::json::object(); }
   /// Statistics gathered in prepare/li, as JSON.

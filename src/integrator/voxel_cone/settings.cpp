@@ -35,6 +35,10 @@ constexpr int kDefaultMarchCones = 6;
 /// Cones per gather at a hit behind mirrors and glass: such a pixel gathers itself (the filter
 /// cannot fill it), so 32 cones there made the glass dragon 13.6 s (11.1 s of it its samples).
 constexpr int kDefaultChainCones = 8;
+/// Glint samples per camera sample where the scene has mirrors or glass: on the glass dragon
+/// (256x256, 16 spp) 0 / 8 / 16 gave relMSE 0.0099 / 0.0048 / 0.0030 in 4.3 / 5.0 / 6.1 s, the
+/// light's image in the glass the noise of nearly all of the error.
+constexpr int kDefaultGlintSamples = 16;
 /// The photon estimate at a cone's exact hit (PhotonRadiance): photons per estimate, and the
 /// largest search radius as a fraction of the scene's bounding-sphere radius.
 constexpr int kDefaultHitPhotons = 32;
@@ -129,6 +133,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
     throw SettingsError("voxcone.hit_radiance: a field read back (voxcone.field) has no photons; give \"field\" or nothing");
   out.hitDirect = r.choice("hit_direct", {"rays", "photons"}) == "rays";
   out.hitEstimate.indirectOnly = out.hitPhotons && out.hitDirect;
+  out.glintSamples = r.integer("glint_samples", anyDelta ? kDefaultGlintSamples : 0, 0, 4096);
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
   out.hitEstimate.cacheStride = r.integer("hit_cache", kDefaultHitCacheStride, 0, 4096);
@@ -152,6 +157,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"photon_seed", photons.seed},
           {"cones", cones},
           {"chain_cones", chainCones},
+          {"glint_samples", glintSamples},
           {"cone_angle", coneAngleDeg},
           {"cone_step", coneStep},
           {"max_distance", maxDistance},

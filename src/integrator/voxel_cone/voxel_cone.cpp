@@ -257,7 +257,7 @@ Vec3 VoxelConeIntegrator::trace(const Ray& ray, Sampler& sampler, IndirectSplit*
   const bool emission = m_settings.view == View::Full || m_settings.view == View::Direct;
   // Only the camera ray's own first hit is split off for the screen-space filter.
   return traceDeltaChains(
-      m_scene, m_accel, ray, sampler, m_settings.maxDepth, emission,
+      m_scene, m_accel, ray, sampler, m_settings.maxDepth, m_settings.maxDepth, emission,
       [this, split, terms](const SurfaceHit& sh, const Vec3& wo, Sampler& px, int depth, const Vec3& weight) {
         return shade(sh, wo, px, depth == 0 ? split : nullptr, terms, weight, depth);
       },
@@ -298,6 +298,22 @@ bool VoxelConeIntegrator::linkedPoints(const Vec3& from, const Vec3& to) const {
   r.dir = to - from;
   r.tMax = 1.0f;
   return !m_accel.occluded(r);
+}
+
+bool VoxelConeIntegrator::seesDelta(const Ray& ray) const {
+  SurfaceHit sh;
+  return intersectSurface(m_scene, m_accel, ray, sh) && m_scene.materials[sh.material].isDelta();
+}
+
+Vec3 VoxelConeIntegrator::liGlint(const Ray& ray, Sampler& sampler) const {
+  if (m_settings.view != View::Full && m_settings.view != View::Direct) return Vec3(0.0f);
+  // One lobe at each dielectric (chosen by weight): a glint sample is a few rays, and many of
+  // them sample the pixel better than a few that split.
+  RadianceTerms terms;
+  traceDeltaChains(
+      m_scene, m_accel, ray, sampler, m_settings.maxDepth, 0, true,
+      [](const SurfaceHit&, const Vec3&, Sampler&, int, const Vec3&) { return Vec3(0.0f); }, &terms);
+  return terms.glint;
 }
 
 Vec3 VoxelConeIntegrator::liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const {

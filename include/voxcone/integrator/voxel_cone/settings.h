@@ -35,6 +35,10 @@ struct VoxelConeSettings {
   uint64_t maxPhotons = 0;
   int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
   int chainCones = 8;           ///< cones per gather behind mirrors and glass (default 8 with "hit", `cones` with "march")
+  /// `glint_samples`: samples per camera sample of the light seen through mirrors and glass, in
+  /// the pixels that see them (Integrator::glintSamples); default 16 where the scene has a
+  /// mirror or glass, else 0.
+  int glintSamples = 0;
   double coneAngleDeg = 0.0;    ///< half-angle, degrees; 0: ConeSet's default for the count
   float coneStep = 1.0f;        ///< march step in lookup voxels, [0.25, 4]
   float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter

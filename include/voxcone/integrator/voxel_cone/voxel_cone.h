@@ -158,6 +158,9 @@ public:
   /// quarter of a footprint above the surface, meets nothing.
   void linkIndirect(IndirectBuffer& buffer) const override;
   bool linkedPoints(const Vec3& from, const Vec3& to) const override;
+  int glintSamples() const override { return m_settings.glintSamples; }
+  bool seesDelta(const Ray& ray) const override;
+  Vec3 liGlint(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
 
