@@ -13,6 +13,12 @@ ratio (Rec. 709 weights); the worst cell is the one farthest from 1. Path's time
 relMSE is interpolated log-log between the two path renders around it ('>' / '<': outside the
 ladder, extrapolated); the speed-up is that time over voxcone's.
 
+Each reference must come from another seed than the table's renders (the scenes' own, as
+`voxcone render` takes them): with the same seed path's first N samples are the reference's
+first N, its error against it too small by about N/REF_SPP of itself, and voxcone's camera
+samples match the reference's too. The reference's sidecar (REFERENCE.json) is read for its seed;
+the same seed is an error.
+
 --closed A=B: scene A must render black; its mean over scene B's voxcone mean is reported (the
 closed-door room against the open one).
 
@@ -57,6 +63,14 @@ def compare(binary, test, ref, regions):
             "mean": lum(m["mean"]), "mean_reference": lum(m["mean_reference"])}
 
 
+def sidecar_seed(image):
+    path = os.path.splitext(image)[0] + ".json"
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        return json.load(f).get("seed")
+
+
 def interpolate(points, x):
     """Time at relMSE x, log-log between the two ladder points around it."""
     pts = sorted(points, key=lambda p: p["relmse"])
@@ -79,7 +93,7 @@ def main():
     ap.add_argument("pairs", nargs="+", help="SCENE.json=REFERENCE.exr")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--options", default="{}", help="voxcone options (JSON) added to the defaults")
-    ap.add_argument("--path-spp", default="4,8,16,32,64,128,256")
+    ap.add_argument("--path-spp", default="4,8,16,32,64,128,256,512")
     ap.add_argument("--regions", type=int, default=4)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--closed", action="append", default=[], help="CLOSED.json=OPEN.json")
@@ -96,7 +110,13 @@ def main():
         seconds, runs = timed(cmd, args.repeat)
         row = {"scene": name, "seconds": seconds, "runs": runs, **compare(args.bin, out, ref, args.regions)}
         with open(os.path.join(args.outdir, name + "-voxcone.json")) as f:
-            stats = json.load(f).get("stats", {}).get("integrator", {})
+            sidecar = json.load(f)
+        stats = sidecar.get("stats", {}).get("integrator", {})
+        ref_seed = sidecar_seed(ref)
+        if ref_seed is not None and ref_seed == sidecar.get("seed"):
+            sys.exit("suite_table: %s was rendered with seed %s, the table's own: render it with another --seed" %
+                     (ref, ref_seed))
+        row["reference_seed"] = ref_seed
         row["photons"] = {k: stats.get(k) for k in ("emitted_global", "stored_global", "seen_photons", "emitted_caustic",
                                                      "stored_caustic", "hit_cache_entries")}
         row["active_voxels"] = stats.get("active_voxels")

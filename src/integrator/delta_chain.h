@@ -15,9 +15,10 @@ namespace voxcone {
 /// the product of the delta lobes' weights that led there), and at delta surfaces every lobe
 /// followed (reflection and refraction both, for glass) up to `maxDepth` segments. With
 /// `terms`, the emission seen is added to terms->emitted times its weight (and to terms->glint
-/// after a delta bounce; shade records its own terms). Splitting at every dielectric doubles the rays per level, so branches whose
-/// accumulated weight (`throughput`, the largest channel of the product of lobe weights) falls
-/// below 1/1000 are dropped: they cannot change the pixel visibly. From depth `splitDepth` on,
+/// after a delta bounce; shade records its own terms). Splitting at every dielectric doubles
+/// the rays per level, so branches whose accumulated weight (`throughput`, the largest channel
+/// of the product of lobe weights) falls below 1/1000 are dropped: they cannot change the pixel
+/// visibly. From depth `splitDepth` on,
 /// a surface with two lobes continues one of them instead, chosen with probability
 /// proportional to its weight's largest channel and its weight divided by that probability
 /// (unbiased; one sampler dimension per choice): a ray's cost then grows with its depth, not

@@ -246,7 +246,8 @@ DVec3 glintSum(const Scene& scene, const Integrator& integrator, const RenderSet
   for (uint32_t s = uint32_t(first) * uint32_t(perSample); s < uint32_t(first + count) * uint32_t(perSample); ++s) {
     sampler.startSample(s);
     const Vec2 jitter = sampler.uniform2();
-    const Vec3 G = integrator.liGlint(scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h), sampler);
+    const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
+    const Vec3 G = integrator.liGlint(ray, sampler);
     if (usableRadiance(G)) sum += DVec3(G);
     else ++bad;
   }
@@ -497,7 +498,8 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           const Ray ray = scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, w, h);
           IndirectSplit sp;
           RadianceTerms terms;
-          Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, &sp, terms) : integrator.liSplit(ray, sampler, sp);
+          Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, &sp, terms)
+                                          : integrator.liSplit(ray, sampler, sp);
           if (glints) {
             L -= terms.glint;
             terms.emitted -= terms.glint;
