@@ -22,11 +22,12 @@ namespace voxcone {
 /// a surface with two lobes continues one of them instead, chosen with probability
 /// proportional to its weight's largest channel and its weight divided by that probability
 /// (unbiased; one sampler dimension per choice): a ray's cost then grows with its depth, not
-/// exponentially.
+/// exponentially. `metGlass`, when given, is set when a chain meets a transmissive surface.
 template <typename Shade>
 Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sampler& sampler, int maxDepth,
                       int splitDepth, bool withEmission, const Shade& shade, RadianceTerms* terms = nullptr,
-                      int depth = 0, float throughput = 1.0f, const Vec3& weight = Vec3(1.0f)) {
+                      int depth = 0, float throughput = 1.0f, const Vec3& weight = Vec3(1.0f),
+                      bool* metGlass = nullptr) {
   SurfaceHit sh;
   if (!intersectSurface(scene, accel, ray, sh)) return Vec3(0.0f);
   const Vec3 woWorld = -glm::normalize(ray.dir);
@@ -37,6 +38,7 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sa
   }
   const Material& mat = scene.materials[sh.material];
   if (!mat.isDelta()) return L + shade(sh, woWorld, sampler, depth, weight);
+  if (metGlass && mat.isTransmissive()) *metGlass = true;
   if (depth + 1 >= maxDepth) return L;
   const Frame frame(sh.shadingNormal);
   DeltaLobe lobes[2];
@@ -57,7 +59,7 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sa
     if (branch < 1e-3f) continue;
     const Ray next = spawnRay(sh.position, sh.positionError, sh.geomNormal, frame.toWorld(lobes[i].wi));
     L += lobes[i].weight * traceDeltaChains(scene, accel, next, sampler, maxDepth, splitDepth, withEmission, shade,
-                                            terms, depth + 1, branch, weight * lobes[i].weight);
+                                            terms, depth + 1, branch, weight * lobes[i].weight, metGlass);
   }
   return L;
 }

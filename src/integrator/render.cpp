@@ -208,19 +208,21 @@ private:
   bool m_firstHit = false, m_terms = false;
 };
 
-/// The pixels that take glint samples (Integrator::glintSamples): those with a probe ray (at the
-/// centres of the pixel's 2 x 2 quarters) whose first surface is a mirror or glass, and their
-/// eight neighbours. The probes are fixed rays, not the camera samples, so which pixels take
-/// glint samples does not depend on those samples (an estimate chosen by its own samples would
-/// be biased).
+/// The pixels that take glint samples (Integrator::glintSamples): those whose probe rays (the
+/// centres of the pixel's 2 x 2 quarters) the integrator says may see glints vary
+/// (glintsVary), and their eight neighbours. The probes are fixed rays, not the camera samples,
+/// so which pixels take glint samples does not depend on those samples (an estimate chosen by
+/// its own samples would be biased).
 std::vector<uint8_t> glintPixels(const Scene& scene, const Integrator& integrator, int w, int h) {
   std::vector<uint8_t> probe(size_t(w) * size_t(h), 0u), out(probe.size(), 0u);
   tbb::parallel_for(0, h, [&](int y) {
-    for (int x = 0; x < w; ++x)
-      for (int q = 0; q < 4 && !probe[size_t(y) * size_t(w) + size_t(x)]; ++q) {
-        const float px = float(x) + 0.25f + 0.5f * float(q & 1), py = float(y) + 0.25f + 0.5f * float(q >> 1);
-        if (integrator.seesDelta(scene.camera.generateRay(px, py, w, h))) probe[size_t(y) * size_t(w) + size_t(x)] = 1u;
-      }
+    for (int x = 0; x < w; ++x) {
+      Ray rays[4];
+      for (int q = 0; q < 4; ++q)
+        rays[q] = scene.camera.generateRay(float(x) + 0.25f + 0.5f * float(q & 1),
+                                           float(y) + 0.25f + 0.5f * float(q >> 1), w, h);
+      probe[size_t(y) * size_t(w) + size_t(x)] = integrator.glintsVary(rays, 4) ? 1u : 0u;
+    }
   });
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)

@@ -94,14 +94,15 @@ public:
   /// unless separatesTerms().
   virtual Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const;
   /// Extra samples, per camera sample, of the light seen through mirrors and glass (0: none).
-  /// renderImage takes them in the pixels next to a probe ray that met a delta surface
-  /// (seesDelta), from a sampler of their own, and there counts the glints (RadianceTerms::glint)
-  /// from them instead of from the camera samples: a light's image in glass is a small, bright
-  /// target whose pixel integral is most of such a pixel's noise, and costs only the rays of its
-  /// delta chains.
+  /// renderImage takes them in the pixels where glintsVary says so for the pixel's fixed probe
+  /// rays, and in their neighbours, from a sampler of their own, and there counts the glints
+  /// (RadianceTerms::glint) from them instead of from the camera samples: a light's image in
+  /// glass is a small, bright target whose pixel integral is most of such a pixel's noise, and
+  /// costs only the rays of its delta chains.
   virtual int glintSamples() const { return 0; }
-  /// Whether the first surface along `ray` is a mirror or glass (glintSamples' probe).
-  virtual bool seesDelta(const Ray& ray) const { return false; }
+  /// Whether the light seen through mirrors and glass may vary over a pixel whose probe rays
+  /// (fixed rays through it) are `probes`.
+  virtual bool glintsVary(const Ray* probes, int count) const { return false; }
   /// The light seen along `ray` after one or more delta bounces, nothing else (RadianceTerms::glint).
   virtual Vec3 liGlint(const Ray& ray, Sampler& sampler) const { return Vec3(0.0f); }
   /// Settings as JSON (written into sidecars).

@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 namespace voxcone {
 
@@ -300,9 +301,26 @@ bool VoxelConeIntegrator::linkedPoints(const Vec3& from, const Vec3& to) const {
   return !m_accel.occluded(r);
 }
 
-bool VoxelConeIntegrator::seesDelta(const Ray& ray) const {
-  SurfaceHit sh;
-  return intersectSurface(m_scene, m_accel, ray, sh) && m_scene.materials[sh.material].isDelta();
+bool VoxelConeIntegrator::glintsVary(const Ray* probes, int count) const {
+  // Yes where a probe meets glass (refraction bends the pixel's rays apart), sees a light through
+  // mirrors, or where the probes' first mirrors are not one plane (a curved mirror spreads the
+  // pixel's reflections); a flat mirror that shows no light shows it nowhere in the pixel.
+  std::optional<Vec3> plane;
+  Sampler unused(SamplerKind::Independent, 0, 0);  // every lobe is followed: no random numbers
+  for (int i = 0; i < count; ++i) {
+    SurfaceHit sh;
+    if (!intersectSurface(m_scene, m_accel, probes[i], sh) || !m_scene.materials[sh.material].isDelta()) continue;
+    if (plane && glm::dot(*plane, sh.shadingNormal) < 0.9999f) return true;
+    plane = sh.shadingNormal;
+    bool glass = false;
+    RadianceTerms terms;
+    traceDeltaChains(
+        m_scene, m_accel, probes[i], unused, m_settings.maxDepth, m_settings.maxDepth, true,
+        [](const SurfaceHit&, const Vec3&, Sampler&, int, const Vec3&) { return Vec3(0.0f); }, &terms, 0, 1.0f,
+        Vec3(1.0f), &glass);
+    if (glass || maxComponent(terms.glint) > 0.0f) return true;
+  }
+  return false;
 }
 
 Vec3 VoxelConeIntegrator::liGlint(const Ray& ray, Sampler& sampler) const {

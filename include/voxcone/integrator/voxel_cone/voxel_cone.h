@@ -159,7 +159,7 @@ public:
   void linkIndirect(IndirectBuffer& buffer) const override;
   bool linkedPoints(const Vec3& from, const Vec3& to) const override;
   int glintSamples() const override { return m_settings.glintSamples; }
-  bool seesDelta(const Ray& ray) const override;
+  bool glintsVary(const Ray* probes, int count) const override;
   Vec3 liGlint(const Ray& ray, Sampler& sampler) const override;
   nlohmann::json settingsJson() const override;
   nlohmann::json statsJson() const override;
