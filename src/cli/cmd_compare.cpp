@@ -135,7 +135,7 @@ void addCompareCommand(CLI::App& app) {
   auto args = std::make_shared<CompareArgs>();
   CLI::App* sub = app.add_subcommand(
       "compare", "Compare a test image with a reference: relMSE, MSE, PSNR (8-bit sRGB), SSIM");
-  sub->add_option("TEST", args->testPath, "Test image (EXR, PNG, any format OpenImageIO reads)")
+  sub->add_option("TEST", args->testPath, "Test image (OpenEXR, PNG or JPEG)")
       ->required()
       ->type_name("");
   sub->add_option("REF", args->refPath, "Reference image of the same size")->required()->type_name("");

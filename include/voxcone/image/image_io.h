@@ -1,8 +1,8 @@
 #pragma once
 /// \file image_io.h
-/// Image files through OpenImageIO (kept out of this header), all written atomically: the data
-/// goes to a temporary file in the target's folder which is renamed over the target, so an
-/// interrupted write never leaves a half-written file.
+/// Image files (OpenEXR, PNG, JPEG; their libraries kept out of this header), all written
+/// atomically: the data goes to a temporary file in the target's folder which is renamed over
+/// the target, so an interrupted write never leaves a half-written file.
 
 #include "voxcone/image/image.h"
 
@@ -66,8 +66,9 @@ std::vector<MetadataAttribute> metadataAttributes(const nlohmann::json& metadata
 /// Write by extension: .exr (float, metadata) or .png (sRGB 8-bit). Throws ImageError.
 void writeImage(const std::string& path, const Image& image, const nlohmann::json& metadata);
 
-/// Read any image OpenImageIO reads; 8-bit sRGB formats (PNG, JPEG) are converted to linear.
-/// Throws ImageError with a one-line message when the file is missing or unreadable.
+/// Read an OpenEXR, PNG or JPEG file (by its signature, whatever its extension); integer formats
+/// (PNG, JPEG) are converted to linear (sRGB, or a PNG's gAMA exponent). Throws ImageError with a
+/// one-line message when the file is missing, unreadable, truncated or of another format.
 Image readImage(const std::string& path);
 
 /// Write pretty JSON (2-space indent) atomically, or as part of `set`. Throws Error.
