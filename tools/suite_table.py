@@ -5,7 +5,8 @@ path needs for the same error.
     tools/suite_table.py OUTDIR SCENE.json=REFERENCE.exr [...] [--threads N] [--options JSON]
                          [--path-spp 4,8,...] [--regions N] [--closed SCENE.json=OPEN.json]
 
-Per scene: voxcone's default render (its scene's spp, --options added), timed as a user waits
+Per scene: voxcone's default render (--method voxcone, whatever method the scene names; its
+scene's spp, --options added), timed as a user waits
 for it: from starting the process to its exit, the image written (the median of --repeat runs);
 then path at each --path-spp, timed the same way. Metrics from `voxcone compare --json
 --regions N` against the reference: relMSE, PSNR (8-bit sRGB) and each cell's mean luminance
@@ -104,9 +105,13 @@ def main():
     rows = []
     for pair in args.pairs:
         scene, ref = pair.split("=", 1)
-        name = os.path.splitext(os.path.basename(scene))[0]
+        # The scene's file name, less .json (a Mitsuba .xml keeps its extension: cornell-box.xml
+        # beside cornell-box.json).
+        name = os.path.basename(scene)
+        name = name[:-5] if name.endswith(".json") else name
         out = os.path.join(args.outdir, name + "-voxcone.exr")
-        cmd = [args.bin, "render", scene, "-t", str(args.threads), "-q", "-o", out, "--options", args.options]
+        cmd = [args.bin, "render", scene, "--method", "voxcone", "-t", str(args.threads), "-q", "-o", out,
+               "--options", args.options]
         seconds, runs = timed(cmd, args.repeat)
         row = {"scene": name, "seconds": seconds, "runs": runs, **compare(args.bin, out, ref, args.regions)}
         with open(os.path.join(args.outdir, name + "-voxcone.json")) as f:
@@ -144,7 +149,8 @@ def main():
         outs = []
         for s in (a, b):
             o = os.path.join(args.outdir, os.path.splitext(os.path.basename(s))[0] + "-closedcheck.exr")
-            subprocess.run([args.bin, "render", s, "-t", str(args.threads), "-q", "-o", o, "--options", args.options],
+            subprocess.run([args.bin, "render", s, "--method", "voxcone", "-t", str(args.threads), "-q", "-o", o,
+                            "--options", args.options],
                            check=True, capture_output=True)
             outs.append(compare(args.bin, o, o, 1)["mean"])
         closed.append({"closed": a, "open": b, "closed_mean": outs[0], "open_mean": outs[1],

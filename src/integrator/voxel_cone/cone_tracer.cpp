@@ -83,6 +83,24 @@ Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tan
   return L;
 }
 
+Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth) const {
+  if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
+  const Material& m = m_scene.materials[sh.material];
+  Vec3 L = directLightSample(m_scene, m_accel, sh, -d, lightU);
+  // The direction from the light's sample, its dimensions swapped and scrambled (the cone's
+  // lightU is its only random number; a Hammersley point shifted per gather).
+  const float uc = lightU.y;
+  Vec2 u(lightU.x * 2.0f, lightU.y * 3.0f + 0.5f);
+  u -= glm::floor(u);
+  const Frame frame(sh.shadingNormal);
+  BsdfSample bs;
+  if (!bsdfSample(m, frame.toLocal(-d), uc, u, bs) || isBlack(bs.weight)) return L;
+  const Vec3 wi = frame.toWorld(bs.wi);
+  const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
+  L += bs.weight * trace(sh.position, sh.positionError, side, wi, std::max(m.roughness, 0.01f), u, depth + 1);
+  return L;
+}
+
 Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
                        const Vec2& lightU, int depth) const {
   const float cosPhi = glm::dot(n, d);
@@ -105,8 +123,9 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
     if (!hit) return Vec3(0.0f);
-    if (m_scene.materials[hit->surface.material].isDelta())
-      return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
+    const Material& hm = m_scene.materials[hit->surface.material];
+    if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
+    if (m_photons && !hm.isDiffuse()) return continueGlossy(hit->surface, d, lightU, depth);
     return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU);
   }
   // Exact visibility along the axis for the first segment (leak mitigation).

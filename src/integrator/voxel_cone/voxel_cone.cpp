@@ -238,8 +238,10 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
     indirect = gatherWeight * gatherDiffuse(sh, woWorld, u, depth > 0);
     return result();
   }
-  if (m_settings.view == View::Caustic || gatherWeight == 0.0f) return result();
-  // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness.
+  if (m_settings.view == View::Caustic) return result();
+  // Glossy: one cone along a BSDF-sampled direction, as wide as the roughness, on every sample
+  // (a pixel's gathering samples alone left the rough gold dragon at relMSE 0.012 where path
+  // needs 10 spp for it).
   BsdfSample bs;
   if (!bsdfSampleFrom(mat, wo, sampler, bs)) return result();
   const Vec3 d = frame.toWorld(bs.wi);
@@ -248,7 +250,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   // steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
   const Vec2 lightU = sampler.uniform2();
-  indirect = gatherWeight * bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf, lightU);
+  indirect = bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d, tanHalf, lightU);
   return result();
 }
 

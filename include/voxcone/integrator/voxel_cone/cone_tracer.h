@@ -56,8 +56,8 @@ public:
   /// on the side the cone leaves, unit direction d; dot(n, d) <= 0 gathers nothing), half-angle
   /// atan(tanHalf). Where the axis's exact ray meets a mirror or glass (delta materials), the
   /// cone's light there is what cones along its reflected and refracted directions gather
-  /// from the hit, weighted by the lobes (`depth`: specular hits so far, up to
-  /// kMaxSpecularDepth). `lightU`: the 2D sample of the light at the hit (hitDirect).
+  /// from the hit, weighted by the lobes (`depth`: specular and glossy hits so far, up to
+  /// kMaxSpecularDepth); at a glossy surface, continueGlossy's. `lightU`: the 2D sample of the light at the hit (hitDirect).
   Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, const Vec2& lightU,
              int depth = 0) const;
   float finestVoxel() const { return m_v0; }  ///< world units
@@ -76,6 +76,10 @@ private:
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
   Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU, int depth) const;
+  /// The light a cone of direction d passes on at glossy surface sh (neither delta nor diffuse:
+  /// no photon estimate there): its direct light by one shadow ray and one cone along a
+  /// direction its BSDF samples, as wide as its roughness (counted as a specular hit).
+  Vec3 continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth) const;
   /// The radiance a cone of direction d (apex `apex`) takes from the surface its exact ray hit
   /// (not a delta one), looked up in the field at voxel size v where there are no photons.
   Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const;
