@@ -256,6 +256,12 @@ DVec3 glintSum(const Scene& scene, const Integrator& integrator, const RenderSet
   return sum / double(perSample);
 }
 
+/// Take a camera sample's glints out of its radiance and its terms (glintSum samples them).
+void leaveOutGlints(Vec3& L, RadianceTerms& terms) {
+  L -= terms.glint;
+  terms.emitted -= terms.glint;
+}
+
 /// One sample's radiance: li, or with AOVs liTerms, whose terms and first hit go into `aovs`
 /// when the estimate is usable; without its glints where `glints` (glintSum takes them).
 Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, AovSums& aovs,
@@ -263,10 +269,7 @@ Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, 
   if (!aovs.active() && !glints) return integrator.li(ray, sampler);
   RadianceTerms terms;
   Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, nullptr, terms) : integrator.li(ray, sampler);
-  if (glints) {
-    L -= terms.glint;
-    terms.emitted -= terms.glint;
-  }
+  if (glints) leaveOutGlints(L, terms);
   if (usableRadiance(L) && aovs.active()) aovs.add(pixel, ray, terms);
   return L;
 }
@@ -502,10 +505,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           RadianceTerms terms;
           Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, &sp, terms)
                                           : integrator.liSplit(ray, sampler, sp);
-          if (glints) {
-            L -= terms.glint;
-            terms.emitted -= terms.glint;
-          }
+          if (glints) leaveOutGlints(L, terms);
           if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
             ++bad;
             oneSurface = false;

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <jpeglib.h>
 
+#include "../support/image_errors.h"
 #include "../support/temp_dir.h"
 
 #include <algorithm>
@@ -205,20 +206,6 @@ void writeCmykJpeg(const std::string& file, int w, int h, const std::vector<unsi
 std::string readBytes(const std::string& file) {
   std::ifstream f(file, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-}
-
-void expectOneLineError(const std::string& file, const std::string& mentions = "") {
-  try {
-    readImage(file);
-    ADD_FAILURE() << "no exception for " << file;
-  } catch (const ImageError& e) {
-    const std::string msg = e.what();
-    EXPECT_NE(msg.find(file), std::string::npos) << msg;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-    if (!mentions.empty()) {
-      EXPECT_NE(msg.find(mentions), std::string::npos) << msg;
-    }
-  }
 }
 
 Image pattern(int w, int h, unsigned seed) {
@@ -429,7 +416,7 @@ TEST_F(ImageCrossCheck, TruncatedFilesThrowOneLineErrors) {
         continue;
       }
       if (std::string(ext) == "jpg" && keep == bytes.size() - 1) continue;  // the EOI marker's last byte
-      expectOneLineError(cut);
+      test::expectOneLineImageError(cut);
     }
     // Corrupted pixel data (bytes flipped in the second half): an error or an image, never a crash.
     std::string flipped = bytes;
@@ -445,17 +432,17 @@ TEST_F(ImageCrossCheck, TruncatedFilesThrowOneLineErrors) {
 
 TEST_F(ImageCrossCheck, OtherFormatsNameTheSupportedOnes) {
   writeWithOiio(path("a.tif"), 4, 4, {"R", "G", "B"}, OIIO::TypeDesc::UINT8, ramp<uint8_t>(48, 24, 255.99));
-  expectOneLineError(path("a.tif"), "OpenEXR, PNG and JPEG");
+  test::expectOneLineImageError(path("a.tif"), "OpenEXR, PNG and JPEG");
   write("b.hdr", "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 1\n\x80\x80\x80\x81");
-  expectOneLineError(path("b.hdr"), "OpenEXR, PNG and JPEG");
+  test::expectOneLineImageError(path("b.hdr"), "OpenEXR, PNG and JPEG");
   // A PNG named .exr is read as the PNG it is; garbage named .jpg is not a JPEG.
   writePng(path("real.png"), Image(3, 2, Vec3(0.5f)));
   fs::copy_file(path("real.png"), path("named.exr"));
   EXPECT_EQ(readImage(path("named.exr")).pixels, readImage(path("real.png")).pixels);
   write("garbage.jpg", std::string(64, 'x'));
-  expectOneLineError(path("garbage.jpg"), "JPEG");
+  test::expectOneLineImageError(path("garbage.jpg"), "JPEG");
   write("tiny.png", "\x89PNG");
-  expectOneLineError(path("tiny.png"));
+  test::expectOneLineImageError(path("tiny.png"));
   // A PNG header claiming 100000 x 100000 pixels in a few bytes: refused, nothing allocated.
   std::string png = readBytes(path("real.png"));
   png[16] = 0, png[17] = 1, png[18] = char(0x86), png[19] = char(0xa0);
@@ -463,5 +450,5 @@ TEST_F(ImageCrossCheck, OtherFormatsNameTheSupportedOnes) {
   const uLong crc = crc32(0, reinterpret_cast<const Bytef*>(png.data() + 12), 17);
   for (int i = 0; i < 4; ++i) png[29 + i] = char((crc >> (24 - 8 * i)) & 0xff);
   write("huge.png", png);
-  expectOneLineError(path("huge.png"));
+  test::expectOneLineImageError(path("huge.png"));
 }

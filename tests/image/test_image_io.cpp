@@ -9,6 +9,7 @@
 
 #include <algorithm>
 
+#include "../support/image_errors.h"
 #include "../support/temp_dir.h"
 #include <nlohmann/json.hpp>
 
@@ -426,22 +427,13 @@ TEST_F(ImageIoTest, WriteJsonAtomic) {
 }
 
 TEST_F(ImageIoTest, ReadMissingOrGarbageThrows) {
-  const auto expectOneLineError = [](const std::string& file) {
-    try {
-      readImage(file);
-      ADD_FAILURE() << "no exception for " << file;
-    } catch (const ImageError& e) {
-      const std::string msg = e.what();
-      EXPECT_NE(msg.find(file), std::string::npos) << msg;
-      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-    }
-  };
-  expectOneLineError(path("missing.exr"));
+  using test::expectOneLineImageError;
+  expectOneLineImageError(path("missing.exr"));
   writeText(path("garbage.exr"), "this is not an OpenEXR file\nsecond line\n");
-  expectOneLineError(path("garbage.exr"));
+  expectOneLineImageError(path("garbage.exr"));
   writeText(path("garbage.png"), std::string(100, '\x7f'));
-  expectOneLineError(path("garbage.png"));
+  expectOneLineImageError(path("garbage.png"));
   writeText(path("empty.png"), "");
-  expectOneLineError(path("empty.png"));
-  expectOneLineError(m_dir.string());
+  expectOneLineImageError(path("empty.png"));
+  expectOneLineImageError(m_dir.string());
 }

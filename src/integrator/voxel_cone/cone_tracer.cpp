@@ -4,6 +4,7 @@
 
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/rng.h"
 #include "voxcone/integrator/whitted.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/photon/photon_radiance.h"
@@ -13,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace voxcone {
 
@@ -87,17 +89,21 @@ Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2&
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   const Material& m = m_scene.materials[sh.material];
   Vec3 L = directLightSample(m_scene, m_accel, sh, -d, lightU);
-  // The direction from the light's sample, its dimensions swapped and scrambled (the cone's
-  // lightU is its only random number; a Hammersley point shifted per gather).
-  const float uc = lightU.y;
-  Vec2 u(lightU.x * 2.0f, lightU.y * 3.0f + 0.5f);
-  u -= glm::floor(u);
+  // The cone's lightU is its only random pair (a Hammersley point, shifted per gather): the
+  // direction's numbers and the next hit's light sample are a hash of its bits, independent of
+  // the light sample taken here.
+  uint32_t bits[2];
+  std::memcpy(bits, &lightU, sizeof bits);
+  const uint64_t k0 = mixBits((uint64_t(bits[0]) << 32 | bits[1]) + 0x9e3779b97f4a7c15ULL), k1 = mixBits(k0);
+  const auto unit = [](uint64_t k, int shift) { return float((k >> shift) & 0xffffffu) * 0x1p-24f; };
+  const float uc = unit(k0, 40);
+  const Vec2 u(unit(k0, 16), unit(k1, 40)), nextLightU(unit(k1, 16), unit(mixBits(k1), 40));
   const Frame frame(sh.shadingNormal);
   BsdfSample bs;
   if (!bsdfSample(m, frame.toLocal(-d), uc, u, bs) || isBlack(bs.weight)) return L;
   const Vec3 wi = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
-  L += bs.weight * trace(sh.position, sh.positionError, side, wi, std::max(m.roughness, 0.01f), u, depth + 1);
+  L += bs.weight * trace(sh.position, sh.positionError, side, wi, std::max(m.roughness, 0.01f), nextLightU, depth + 1);
   return L;
 }
 
