@@ -33,6 +33,12 @@ constexpr float kLift = 0.05f;
 constexpr int kAreaProbes = 8;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
 constexpr int kCacheCandidates = 8;
+/// Outside where PhotonRadianceSettings::cacheWhere asks for the cache, one in this many of the
+/// entries. Measured (small-objects, 256x256, 2 threads): with none there, the gathers that hit
+/// such places estimated in full, 0.15 -> 0.31 s; with every 4th, 44k entries instead of 55k
+/// (0.70-0.80 -> 0.63 s to make them) and the gathers as fast as with all; the image the same
+/// to 4 digits of relMSE.
+constexpr size_t kSparseEntries = 4;
 
 /// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
 float pointHash(const Vec3& p) {
@@ -60,11 +66,14 @@ PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const Pho
   for (size_t i = 0; i < m_photons.size(); ++i) positions[i] = m_photons[i].position;
   m_tree = PhotonKdTree(positions);
   if (s.cacheStride <= 1) return;
-  // Every cacheStride-th photon on a diffuse surface, estimated on its own side from the other
-  // photons only; each entry alone, so the cache is the same at any thread count.
+  // Every cacheStride-th photon on a diffuse surface (where cacheWhere does not accept it, every
+  // kSparseEntries-th of those), estimated on its own side from the other photons only; each
+  // entry alone, so the cache is the same at any thread count.
   std::vector<uint32_t> at;
   for (size_t i = 0; i < m_photons.size(); i += size_t(s.cacheStride))
-    if (!isBlack(m_photons[i].albedo)) at.push_back(uint32_t(i));
+    if (!isBlack(m_photons[i].albedo) && (!s.cacheWhere || (i / size_t(s.cacheStride)) % kSparseEntries == 0 ||
+                                          s.cacheWhere(m_photons[i].position, m_photons[i].normal)))
+      at.push_back(uint32_t(i));
   m_cache.resize(at.size());
   tbb::parallel_for(size_t(0), at.size(), [&](size_t e) {
     const Photon& ph = m_photons[at[e]];
@@ -178,6 +187,7 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
 }
 
 bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const {
+  // Outside where the cache is, the nearest entry passing the filters could lie far off.
   if (m_cache.empty()) return false;
   thread_local std::vector<KdNeighbor> near;
   const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;

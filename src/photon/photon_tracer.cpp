@@ -8,6 +8,7 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
+#include "voxcone/photon/emission_guide.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
@@ -39,23 +40,30 @@ constexpr uint64_t kBlockSize = 4096;
 
 enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 
-/// Trace photon `index` of `pass` and append what it stores to `out`. `powerScale` is one over
-/// the photons emitted in the pass, so that each pass carries the lights' full flux.
+/// Trace photon `index` of `pass` and append what it stores to `out` (and, with `bins`, the
+/// emission guide's bin of each to `bins`). `powerScale` is one over the photons emitted in the
+/// pass, so that each pass carries the lights' full flux.
 void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
-                 Pass pass, uint64_t index, double powerScale, const Sphere& aim, std::vector<Photon>& out) {
+                 Pass pass, uint64_t index, double powerScale, const Sphere& aim, std::vector<Photon>& out,
+                 std::vector<uint32_t>* bins) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
 
   // Emission. The light choice takes 32 random bits as a double (the CDF is double).
   EmittedPhoton e;
-  const double uLight = double(rng.nextU32()) * 0x1p-32;
+  double uLight = double(rng.nextU32()) * 0x1p-32;
   const float uSide = rng.uniform();
   const Vec2 uPos = rng.uniform2();
-  const Vec2 uDir = rng.uniform2();
+  Vec2 uDir = rng.uniform2();
+  // The global pass through the emission guide: the same primary sample space, drawn by the
+  // guide's density, each photon weighted by the uniform density over it.
+  const EmissionGuide* guide = pass == Pass::Global ? settings.guide.get() : nullptr;
+  const double guideWeight = guide ? guide->remap(uLight, uDir) : 1.0;
+  const uint32_t bin = guide ? uint32_t(guide->binOf(uLight, uDir)) : 0;
   const bool aimed = pass == Pass::Caustic && aim.radius >= 0.0f;
   if (!(aimed ? lights.sampleToward(uLight, uSide, uPos, uDir, aim, e) : lights.sample(uLight, uSide, uPos, uDir, e)))
     return;
-  Vec3 power = Vec3(e.fluxWatts * powerScale);
+  Vec3 power = Vec3(e.fluxWatts * (powerScale * guideWeight));
   if (!isFinite(power) || !(maxComponent(power) > 0.0f)) return;
   Ray ray = e.ray;
 
@@ -86,6 +94,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
         ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
         ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));
         out.push_back(ph);
+        if (bins) bins->push_back(bin);
       }
       // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.
       if (pass == Pass::Caustic) return;
@@ -154,6 +163,8 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   // One parallel loop over the blocks of both passes; block b collects into perBlock[b], and
   // the blocks are concatenated in order, so the maps do not depend on the thread count.
   std::vector<std::vector<Photon>> perBlock(blocks[0] + blocks[1]);
+  const bool record = settings.recordBins && settings.guide;
+  std::vector<std::vector<uint32_t>> perBlockBins(record ? blocks[0] : 0);
   std::atomic<bool> cancelled{false};
   tbb::parallel_for(tbb::blocked_range<uint64_t>(0, perBlock.size(), 1), [&](const tbb::blocked_range<uint64_t>& r) {
     for (uint64_t b = r.begin(); b != r.end(); ++b) {
@@ -167,7 +178,9 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
       const uint64_t last = std::min(counts[p], first + kBlockSize);
       const double powerScale = 1.0 / double(counts[p]);
       std::vector<Photon>& out = perBlock[b];
-      for (uint64_t i = first; i < last; ++i) tracePhoton(scene, accel, lights, settings, pass, i, powerScale, aim, out);
+      std::vector<uint32_t>* bins = record && pass == Pass::Global ? &perBlockBins[b] : nullptr;
+      for (uint64_t i = first; i < last; ++i)
+        tracePhoton(scene, accel, lights, settings, pass, i, powerScale, aim, out, bins);
       prog.advance(last - first);
     }
   });
@@ -182,6 +195,10 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
     std::vector<Photon>& dst = b < blocks[0] ? maps.global : maps.caustic;
     dst.insert(dst.end(), perBlock[b].begin(), perBlock[b].end());
     std::vector<Photon>().swap(perBlock[b]);
+  }
+  if (record) {
+    maps.globalBins.reserve(sizes[0]);
+    for (std::vector<uint32_t>& bins : perBlockBins) maps.globalBins.insert(maps.globalBins.end(), bins.begin(), bins.end());
   }
   prog.finish();
 

@@ -131,6 +131,31 @@ TEST(PhotonRadiance, PrecomputedIrradianceMatchesTheFullEstimate) {
   }
 }
 
+TEST(PhotonRadiance, TheCacheIsDenseWhereAskedAndSparseElsewhere) {
+  // The uniform floor of the test above, the cache dense only where z < 0 (cacheWhere): every
+  // 8th photon there is an entry, every 32nd elsewhere (10,000 entries at most: about 6,250).
+  // Both halves' means are within the bound of the test above of E albedo / pi.
+  const Scene scene = wallScene(0.0055f);
+  PhotonMaps maps;
+  addFloorPhotons(maps.global, 80000, -2.0f, 0.0f, 1e-4f, 4);
+  const auto accel = buildAccel("hbvh", scene);
+  PhotonRadianceSettings s{32, 1.0f, 8};
+  s.cacheWhere = [](const Vec3& p, const Vec3&) { return p.z < 0.0f; };
+  const PhotonRadiance est(scene, *accel, maps, s);
+  EXPECT_GT(est.cacheSize(), 5750u);
+  EXPECT_LT(est.cacheSize(), 6750u);
+  const float expected = 0.5f / kPi;
+  Rng rng(5, 0);
+  double sums[2] = {0.0, 0.0};
+  for (int i = 0; i < 400; ++i) {
+    const float x = -1.8f + 1.6f * rng.uniform();
+    const float z = -1.8f + 1.6f * rng.uniform();
+    sums[0] += est.radiance(floorHit(scene, x, z), Vec3(0, 1, 0)).x;
+    sums[1] += est.radiance(floorHit(scene, x, -z), Vec3(0, 1, 0)).x;
+  }
+  for (double sum : sums) EXPECT_NEAR(sum / 400.0, expected, 0.03 * expected);
+}
+
 TEST(PhotonRadiance, NoLightThroughAThinWall) {
   // The lit half of the floor (x < 0) is 5.5 mm from points on the dark half (x > t): their
   // search discs reach across the wall, but no photon is in sight of them.

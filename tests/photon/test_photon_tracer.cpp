@@ -211,12 +211,7 @@ TEST(PhotonTracer, GreyFurnaceKeepsPhotonPowerConstant) {
   EXPECT_NEAR(sum.y, 2.0 * 4.0 * kPi, 5.0 * 0.707 / std::sqrt(double(n)) * 2.0 * 4.0 * kPi);
 }
 
-/// Solid angle of the rectangle [x0, x1] x [z0, z1] in the plane y = 0 seen from (0, h, 0):
-/// the corner function atan(x z / (h sqrt(x^2 + z^2 + h^2))) summed with signs.
-double rectangleSolidAngle(double x0, double x1, double z0, double z1, double h) {
-  auto f = [h](double x, double z) { return std::atan(x * z / (h * std::sqrt(x * x + z * z + h * h))); };
-  return f(x1, z1) - f(x0, z1) - f(x1, z0) + f(x0, z0);
-}
+using test::rectangleSolidAngle;
 
 TEST(PhotonTracer, PointLightIrradianceOnPlane) {
   // A point light of intensity I at height h = 1 above an absorbing plane: the flux through a

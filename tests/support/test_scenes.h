@@ -3,6 +3,7 @@
 
 #include "voxcone/scene/scene.h"
 
+#include <cmath>
 #include <string>
 
 namespace voxcone::test {
@@ -29,6 +30,13 @@ inline Scene furnaceScene(float albedo, float emission, float pointIntensity, in
                            R"(]
   })";
   return parseScene(json, "furnace", ".");
+}
+
+/// Solid angle of the rectangle [x0, x1] x [z0, z1] in the plane y = 0 seen from (0, h, 0):
+/// the corner function atan(x z / (h sqrt(x^2 + z^2 + h^2))) summed with signs.
+inline double rectangleSolidAngle(double x0, double x1, double z0, double z1, double h) {
+  auto f = [h](double x, double z) { return std::atan(x * z / (h * std::sqrt(x * x + z * z + h * h))); };
+  return f(x1, z1) - f(x0, z1) - f(x1, z0) + f(x0, z0);
 }
 
 }  // namespace voxcone::test

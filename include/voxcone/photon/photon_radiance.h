@@ -34,6 +34,7 @@
 #include "voxcone/photon/photon_kdtree.h"
 #include "voxcone/photon/photon_tracer.h"
 
+#include <functional>
 #include <vector>
 
 namespace voxcone {
@@ -52,6 +53,10 @@ struct PhotonRadianceSettings {
   /// Irradiance precomputed at every cacheStride-th photon (0 or 1: none, every point estimates
   /// in full).
   int cacheStride = 0;
+  /// Where the cache is dense: every cacheStride-th photon (position, normal) this accepts is an
+  /// entry, and a sparser set of the others (a point there, rarely asked for, takes a farther
+  /// entry); none: dense everywhere.
+  std::function<bool(const Vec3& position, const Vec3& normal)> cacheWhere{};
   /// Leave out the global photons straight from a light (bounces 0): the estimate is then the
   /// light that bounced at least once, for callers that take direct light by shadow rays.
   bool indirectOnly = false;

@@ -11,12 +11,14 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace voxcone {
 
 class Scene;
 class Accel;
+class EmissionGuide;
 
 /// A photon stored at a diffuse surface hit.
 struct Photon {
@@ -66,6 +68,11 @@ struct PhotonSettings {
   /// the map): an L S+ D path must meet a specular surface first, so nothing is lost, and far
   /// more of the pass's photons become caustics.
   bool aimCaustics = true;
+  /// The global pass's emission through this guide (EmissionGuide: photons guided to what the
+  /// camera sees, weighted so that the map stays unbiased); none: unguided.
+  std::shared_ptr<const EmissionGuide> guide;
+  /// With a guide: PhotonMaps::globalBins names the guide's bin of each global photon's emission.
+  bool recordBins = false;
 };
 
 /// Statistics of one tracing run.
@@ -84,6 +91,8 @@ struct PhotonStats {
 struct PhotonMaps {
   std::vector<Photon> global;
   std::vector<Photon> caustic;
+  /// With PhotonSettings::recordBins: the emission guide's bin each global photon left in.
+  std::vector<uint32_t> globalBins;
   PhotonStats stats;
 };
 

@@ -58,6 +58,9 @@ constexpr int kDefaultHitCacheStride = 8;
 /// suite, its held-out variants and the Cornell scenes within 4.4% (one seed), at 0.3-0.9 s more
 /// per render than 100k.
 constexpr int kDefaultPhotonTarget = 200000;
+/// The share of the second pass's photons emitted uniformly when the pilot guides it
+/// (EmissionGuide's floor: a photon weighs at most 1 / floor of an unguided one).
+constexpr double kDefaultGuideFloor = 0.25;
 constexpr int kDefaultMaxPhotons = 2000000;
 }  // namespace
 
@@ -112,6 +115,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   out.maxPhotons = uint64_t(r.integer("max_photons", kDefaultMaxPhotons, 1, kMaxInt));
   if (photonsGiven && out.photonTarget > 0)
     throw SettingsError("voxcone.photon_target: the photon count is given (photons); give one or the other");
+  out.guideFloor = r.number("photon_guide", kDefaultGuideFloor, 0.0, 1.0);
 
   out.hitGather = r.choice("gather", {"hit", "march"}) == "hit";
   out.cones = r.integer("cones", out.hitGather ? kDefaultHitCones : kDefaultMarchCones, 1, 256);
@@ -153,6 +157,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"photons", photons.photons},
           {"photon_target", photonTarget},
           {"max_photons", maxPhotons},
+          {"photon_guide", guideFloor},
           {"caustic_photons", photons.causticPhotons},
           {"photon_seed", photons.seed},
           {"cones", cones},

@@ -10,6 +10,7 @@
 #include "voxcone/core/timer.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/whitted.h"
+#include "voxcone/photon/emission_guide.h"
 #include "voxcone/photon/seen_region.h"
 #include "voxcone/scene/bsdf.h"
 
@@ -21,6 +22,11 @@
 #include <optional>
 
 namespace voxcone {
+
+namespace {
+/// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
+constexpr double kGuidePerBin = 8.0;
+}  // namespace
 
 VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
     : m_scene(c.scene), m_accel(c.accel), m_settings(VoxelConeSettings::fromOptions(c.options, c.scene, c.settings)),
@@ -52,26 +58,69 @@ void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
 
 PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   m_stats = nlohmann::json::object();
-  PhotonMaps maps = tracePhotons(m_scene, m_accel, m_settings.photons, progress);
+  m_seen.reset();
+  PhotonSettings pilot = m_settings.photons;
+  const bool guided = m_settings.photonTarget > 0 && m_settings.guideFloor > 0.0 && m_settings.guideFloor < 1.0;
+  // The pilot names the bin of the finest guide's layout each photon left in (its photons are
+  // the unguided ones: the uniform guide remaps nothing): a slice of the light choice per light
+  // up to 8, and 16 x 16 direction cells.
+  int slices = 1;
+  while (slices < 8 && size_t(slices) * 2 <= m_scene.lightCount()) slices *= 2;
+  int dirRes = 16;
+  if (guided) {
+    pilot.guide = std::make_shared<EmissionGuide>(slices, dirRes);
+    pilot.recordBins = true;
+  }
+  PhotonMaps maps = tracePhotons(m_scene, m_accel, pilot, progress);
   if (m_settings.photonTarget == 0) return maps;
   // The cells the camera's gathers read: cubes of a 64th of the scene's bounding-sphere
   // diameter, about the photon estimate's search radius (hit_radius).
   Timer t;
   const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
-  const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
+  m_seen = std::make_shared<const SeenRegion>(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
+  const SeenRegion& seen = *m_seen;
   // The photons the estimates use: with direct light by shadow rays, those that bounced.
   const int minBounces = m_settings.hitEstimate.indirectOnly ? 1 : 0;
-  uint64_t inSeen = seen.count(maps.global, minBounces);
+  std::vector<double> useful(guided ? pilot.guide->bins() : 0, 0.0);
+  uint64_t inSeen = 0;
+  for (size_t i = 0; i < maps.global.size(); ++i) {
+    const Photon& p = maps.global[i];
+    if (p.bounces < minBounces || !seen.contains(p.position)) continue;
+    ++inSeen;
+    if (guided) useful[maps.globalBins[i]] += 1.0;
+  }
+  std::vector<uint32_t>().swap(maps.globalBins);
   m_stats["seen_cells"] = seen.cells();
   m_stats["pilot_photons"] = {{"emitted", maps.stats.emittedGlobal}, {"stored", maps.global.size()}, {"seen", inSeen}};
   if (inSeen < m_settings.photonTarget) {
     // The share the pilot put in the seen cells sets the count (5% over, whole blocks of 1024);
     // none at all: the most allowed.
-    const double share = double(inSeen) / double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
-    const double wanted = share > 0.0 ? 1.05 * double(m_settings.photonTarget) / share : double(m_settings.maxPhotons);
+    const double emitted = double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
+    double share = double(inSeen) / emitted;
     PhotonSettings more = m_settings.photons;
+    // Guided by the pilot where that is worth it: the layout its counts support (8 useful
+    // photons per bin at least), and the effective number of useful photons per photon (their
+    // weights differ) at least a quarter above the unguided share.
+    if (guided && EmissionGuide::coarsen(double(inSeen), kGuidePerBin, slices, dirRes)) {
+      const std::vector<double> coarse =
+          EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), slices, dirRes);
+      auto guide = std::make_shared<EmissionGuide>(EmissionGuide::fromUseful(slices, dirRes, coarse, m_settings.guideFloor));
+      double usefulPer = 0.0, effectivePer = 0.0;
+      guide->expectedYield(coarse, emitted, usefulPer, effectivePer);
+      m_stats["photon_guide"] = {{"slices", slices},
+                                 {"dir_res", dirRes},
+                                 {"unguided_share", share},
+                                 {"expected_share", usefulPer},
+                                 {"expected_effective_share", effectivePer}};
+      if (effectivePer > 1.25 * share) {
+        more.guide = guide;
+        share = effectivePer;
+      }
+      m_stats["photon_guide"]["used"] = bool(more.guide);
+    }
+    const double wanted = share > 0.0 ? 1.05 * double(m_settings.photonTarget) / share : double(m_settings.maxPhotons);
     more.photons = std::min<uint64_t>(m_settings.maxPhotons, (uint64_t(std::ceil(wanted)) + 1023) / 1024 * 1024);
-    if (more.photons > maps.stats.emittedGlobal) {
+    if (more.photons > maps.stats.emittedGlobal || more.guide) {
       maps = tracePhotons(m_scene, m_accel, more, progress);
       inSeen = seen.count(maps.global, minBounces);
     }
@@ -106,7 +155,14 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   m_tracer.reset();
   if (m_settings.hitPhotons) {
     Timer kd;
-    m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
+    PhotonRadianceSettings estimate = m_settings.hitEstimate;
+    // The precomputed estimates where the camera's gathers read, and a cell around (elsewhere,
+    // rarely asked for, a point estimates in full).
+    if (m_seen)
+      estimate.cacheWhere = [near = std::make_shared<const SeenRegion>(m_seen->dilated())](const Vec3& p, const Vec3&) {
+        return near->contains(p);
+      };
+    m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, estimate);
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
   const uint64_t photonPeak = peakRssBytes();

@@ -430,7 +430,9 @@ TEST(VoxelCone, GlintSamplesSeeALightInAMirrorAsItIsWithLessNoise) {
     double sum = 0.0, sq = 0.0;
     for (size_t p = 0; p < img.pixels.size(); ++p) {
       const float e = m.exact[p];
-      if (e == 0.0f || e == 4.0f) EXPECT_NEAR(img.pixels[p].y, e, 1e-5f) << "glints " << k << ", pixel " << p;
+      if (e == 0.0f || e == 4.0f) {
+        EXPECT_NEAR(img.pixels[p].y, e, 1e-5f) << "glints " << k << ", pixel " << p;
+      }
       sum += img.pixels[p].y;
       sq += (img.pixels[p].y - e) * (img.pixels[p].y - e);
       EXPECT_EQ(img.pixels[p].x, img.pixels[p].y);
@@ -493,7 +495,8 @@ TEST(VoxelCone, BadOptionsAreSettingsErrors) {
   const Hbvh accel(scene);
   for (const char* bad : {R"({"cones": 0})", R"({"level": 13})", R"({"view": "nope"})", R"({"unknown": 1})",
                           R"({"cone_angle": -1})", R"({"coarsest_level": 9, "level": 8})",
-                          R"({"gather_spacing": 2, "filter": 0})", R"({"gather_spacing": 0})"}) {
+                          R"({"gather_spacing": 2, "filter": 0})", R"({"gather_spacing": 0})",
+                          R"({"photon_guide": -0.1})", R"({"photon_guide": 1.5})", R"({"photon_guide": "yes"})"}) {
     IntegratorContext ctx{scene, accel, scene.render, nlohmann::json::parse(bad)};
     EXPECT_THROW(createIntegrator("voxcone", ctx), SettingsError) << bad;
   }

@@ -33,6 +33,10 @@ struct VoxelConeSettings {
   /// second pass traces the count that share needs, up to `max_photons`. 0: photons.photons.
   uint64_t photonTarget = 0;
   uint64_t maxPhotons = 0;
+  /// `photon_guide`: with photon_target, the second pass's emission guided by where the pilot's
+  /// photons were of use (EmissionGuide), each bin keeping `guideFloor` of its uniform share;
+  /// 0: unguided.
+  double guideFloor = 0.0;
   int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
   int chainCones = 8;           ///< cones per gather behind mirrors and glass (default 8 with "hit", `cones` with "march")
   /// `glint_samples`: samples per camera sample of the light seen through mirrors and glass, in

@@ -7,7 +7,8 @@
 /// prepare(): photons are traced from the lights (global and, when a delta material exists,
 /// caustic map), as many as put `photon_target` of them in the cells the camera's gathers read
 /// (SeenRegion: a pilot pass of 10k, then the count its share needs; with `hit_direct` = "rays"
-/// only photons that bounced count, being the ones the estimate uses; stats seen_photons), the
+/// only photons that bounced count, being the ones the estimate uses; stats seen_photons; the
+/// second pass guided, where that pays, by the pilot's useful photons: EmissionGuide), the
 /// scene is voxelized at `level`, the photons are injected and the mips are built. With the
 /// default `gather` = "hit" the global photons go into a kd-tree (PhotonRadiance) that cones
 /// read at their exact hits, and the main grid holds only the caustic photons; with "march" it
@@ -130,8 +131,10 @@
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
+#include "voxcone/photon/seen_region.h"
 #include "voxcone/voxel/voxel_field.h"
 
+#include <memory>
 #include <optional>
 
 namespace voxcone {
@@ -177,7 +180,7 @@ private:
              const Vec3& weight, int depth) const;
   /// The photon maps: settings.photons photons, or with a photon target as many as put that
   /// many in the cells the camera's gathers read (a pilot pass, then the count its share
-  /// needs). Starts m_stats with the seen cells and photons.
+  /// needs). Starts m_stats with the seen cells and photons; keeps the seen cells in m_seen.
   PhotonMaps tracePhotonsForView(Progress* progress);
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
@@ -197,6 +200,8 @@ private:
 
   VoxelField m_field;
   PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
+  /// The cells the camera's gathers read (with a photon target): the estimate's cache is there.
+  std::shared_ptr<const SeenRegion> m_seen;
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
   nlohmann::json m_stats = nlohmann::json::object();
