@@ -10,7 +10,7 @@ namespace {
 double luminanceD(const DVec3& rgb) { return 0.2126 * rgb.x + 0.7152 * rgb.y + 0.0722 * rgb.z; }
 }  // namespace
 
-LightEmission::LightEmission(const Scene& scene) : m_scene(scene) {
+LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scene.boundingSphere()) {
   // Emissive triangles: flux of a Lambertian emitter, pi * Le * A per emitting side.
   std::vector<double> power;
   for (uint32_t t = 0; t < scene.triangles.size(); ++t) {
@@ -38,6 +38,18 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene) {
     power.push_back(lum);
   }
 
+  // Directional lights: the flux through the bounding sphere's cross-section, E pi R^2.
+  for (size_t i = 0; i < scene.directionalLights.size(); ++i) {
+    Light l;
+    l.directional = static_cast<int32_t>(i);
+    const double r = double(m_sphere.radius);
+    l.fluxWatts = double(kPi) * r * r * glm::max(DVec3(scene.directionalLights[i].irradiance), DVec3(0.0));
+    const double lum = luminanceD(l.fluxWatts);
+    if (!(lum > 0.0) || !std::isfinite(lum)) continue;
+    m_lights.push_back(l);
+    power.push_back(lum);
+  }
+
   // Choice in proportion to luminance; the RGB flux rides along (divided by the pmf on emission).
   double total = 0.0;
   for (double p : power) total += p;
@@ -55,6 +67,11 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene) {
     m_totalFlux += m_lights[i].fluxWatts;
   }
   m_cdf.back() = 1.0;
+}
+
+Vec3 LightEmission::discCentre(const Vec3& direction) const {
+  // 1% outside the sphere: a point of the disc lies at least that far from the scene.
+  return m_sphere.center - direction * (1.01f * m_sphere.radius + 1e-6f);
 }
 
 size_t LightEmission::choose(double uLight) const {
@@ -82,6 +99,17 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   // per channel even when the lights differ in colour).
   out.fluxWatts = light.fluxWatts / m_pmf[idx];
 
+  if (light.directional >= 0) {
+    // A uniform point on the disc of radius R across the light, outside the scene: every ray
+    // of the light that meets the scene starts on it, each carrying E pi R^2 / photons.
+    const Vec3 d = m_scene.directionalLights[static_cast<size_t>(light.directional)].direction;
+    const Vec2 q = sampleConcentricDisk(uDir) * m_sphere.radius;
+    out.ray = Ray();
+    out.ray.origin = discCentre(d) + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
+    out.ray.dir = d;
+    return isFinite(out.ray.origin);
+  }
+
   if (light.pointLight >= 0) {
     // Point light: uniform direction on the sphere; no surface, so no offset.
     out.ray = Ray();
@@ -107,6 +135,24 @@ bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, c
   if (m_cdf.empty()) return false;
   const size_t idx = choose(uLight);
   const Light& light = m_lights[idx];
+  if (light.directional >= 0) {
+    // The paths whose first hit lies in the target start in the disc of its radius around the
+    // target's centre projected onto the emitting disc: uniform there, E pi r^2 each.
+    const Vec3 d = m_scene.directionalLights[static_cast<size_t>(light.directional)].direction;
+    if (!(target.radius >= 0.0f)) return sample(uLight, uSide, uPos, uDir, out);
+    const Vec3 centre = discCentre(d);
+    const Vec3 onDisc = target.center - d * glm::dot(target.center - centre, d);
+    const float r = std::min(target.radius, m_sphere.radius);
+    const Vec2 q = sampleConcentricDisk(uDir) * r;
+    out.ray = Ray();
+    out.ray.origin = onDisc + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
+    out.ray.dir = d;
+    const double rr = double(r);
+    out.fluxWatts = double(kPi) * rr * rr *
+                    glm::max(DVec3(m_scene.directionalLights[static_cast<size_t>(light.directional)].irradiance), DVec3(0.0)) /
+                    m_pmf[idx];
+    return isFinite(out.ray.origin);
+  }
   // The emitting point (as sample()).
   Vec3 pError(0.0f), n(0.0f);
   const Vec3 p = light.pointLight >= 0 ? m_scene.pointLights[static_cast<size_t>(light.pointLight)].position

@@ -28,8 +28,9 @@ struct EmittedPhoton {
 /// The lights of a scene with their flux and the power distribution used to choose them.
 class LightEmission {
 public:
-  /// Collects the emissive triangles (positive area and flux) and the point lights with
-  /// positive luminance of intensity.
+  /// Collects the emissive triangles (positive area and flux), the point lights with positive
+  /// luminance of intensity and the directional lights with positive luminance of irradiance
+  /// (emitting from a disc that covers the scene's bounding sphere, pbrt's distant light).
   explicit LightEmission(const Scene& scene);
 
   /// True when no light emits anything (no photon can be emitted).
@@ -37,14 +38,15 @@ public:
   /// Number of lights that can be chosen.
   size_t lightCount() const { return m_cdf.size(); }
   /// Sum of every light's flux, W per channel (Lambertian emitter: pi * Le * area per
-  /// emitting side; point light: 4 pi I).
+  /// emitting side; point light: 4 pi I; directional: E pi R^2, R the bounding sphere's).
   const DVec3& totalFlux() const { return m_totalFlux; }
   /// Probability of choosing light `i` (emissive triangles first, then point lights).
   double pmf(size_t i) const { return m_pmf[i]; }
 
   /// Sample an emitted photon. uLight in [0,1) chooses the light (double, so that lights of
   /// probability below float resolution keep their share), uSide in [0,1) the side of a
-  /// two-sided emitter, uPos in [0,1)^2 the point on a triangle, uDir in [0,1)^2 the direction.
+  /// two-sided emitter, uPos in [0,1)^2 the point on a triangle, uDir in [0,1)^2 the direction
+  /// (for a directional light, whose direction is fixed, the point on its disc).
   /// Returns false when nothing is emitted (no lights).
   bool sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const;
   /// The same light and point, but the direction uniform in the cone from that point towards
@@ -59,6 +61,7 @@ private:
   struct Light {
     uint32_t triangle = 0;   ///< emissive triangle, or
     int32_t pointLight = -1; ///< index in Scene::pointLights (>= 0 for a point light)
+    int32_t directional = -1;///< index in Scene::directionalLights (>= 0 for a directional light)
     DVec3 fluxWatts{0.0};
     bool twoSided = false;
   };
@@ -68,7 +71,12 @@ private:
   /// triangle's front (winding) normal.
   Vec3 pointOn(const Light& light, const Vec2& uPos, Vec3& pError, Vec3& frontNormal) const;
 
+  /// The disc a directional light emits from: centred on the bounding sphere's axis along the
+  /// light, a little outside the sphere, radius R.
+  Vec3 discCentre(const Vec3& direction) const;
+
   const Scene& m_scene;
+  Sphere m_sphere;  ///< the scene's bounding sphere
   std::vector<Light> m_lights;
   std::vector<double> m_cdf;   ///< cumulative choice probability, the last entry exactly 1
   std::vector<double> m_pmf;

@@ -707,8 +707,21 @@ public:
     allowAttrs(n, {"type", "id", "name"});
     Props p(*this, n);
     if (p.type() == "area") fail(n, "an area emitter must be nested in a <shape>");
+    if (p.type() == "directional") {
+      // Mitsuba 3's directional emitter: `direction`, or to_world applied to +z; `irradiance`.
+      DirectionalLight dl;
+      if (p.has("direction") && p.has("to_world")) fail(n, "give direction or to_world, not both");
+      const glm::dmat4 xf = p.getTransform("to_world");
+      const Vec3 d = p.has("direction") ? p.getPoint("direction", Vec3(0.0f)) : toFloat(n, DVec3(xf * glm::dvec4(0, 0, 1, 0)));
+      if (!(glm::length(d) > 0.0f) || !isFinite(glm::normalize(d))) fail(n, "a directional emitter needs a non-zero direction");
+      dl.direction = glm::normalize(d);
+      dl.irradiance = p.getColor("irradiance", Vec3(1.0f));
+      p.finish();
+      m_scene.directionalLights.push_back(dl);
+      return;
+    }
     if (p.type() != "point")
-      fail(n, "unsupported emitter plugin '" + p.type() + "' (voxcone maps point, and area inside a shape)");
+      fail(n, "unsupported emitter plugin '" + p.type() + "' (voxcone maps point, directional, and area inside a shape)");
     PointLight pl;
     const glm::dmat4 xf = p.getTransform("to_world");
     if (p.has("position") && p.has("to_world")) fail(n, "give position or to_world, not both");

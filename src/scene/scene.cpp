@@ -48,6 +48,10 @@ void Scene::finalize() {
     power.push_back(flux);
   }
   for (const PointLight& pl : pointLights) power.push_back(4.0f * kPi * std::max(0.0f, luminance(pl.intensity)));
+  // A directional light: the flux through the bounding sphere's cross-section.
+  const float radius = boundingSphere().radius;
+  for (const DirectionalLight& dl : directionalLights)
+    power.push_back(kPi * radius * radius * std::max(0.0f, luminance(dl.irradiance)));
 
   double total = 0.0;
   for (float p : power) total += p;
@@ -138,7 +142,21 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice) const {
     ls.pdf = pmf * dist2 / (std::fabs(cosL) * area);
     return ls;
   }
-  const PointLight& pl = pointLights[idx - m_emissiveTris.size()];
+  const size_t delta = idx - m_emissiveTris.size();
+  if (delta >= pointLights.size()) {
+    // Directional: from -direction, its lightPos beyond the scene's bounding sphere (twice the
+    // farthest the sphere reaches from ref), so that the shadow ray crosses the whole scene.
+    const DirectionalLight& dl = directionalLights[delta - pointLights.size()];
+    const Sphere s = boundingSphere();
+    ls.distance = 2.0f * (glm::length(ref - s.center) + s.radius) + 1.0f;
+    ls.wi = -dl.direction;
+    ls.radiance = dl.irradiance;
+    ls.lightPos = ref + ls.wi * ls.distance;
+    ls.pdf = pmf;
+    ls.delta = true;
+    return ls;
+  }
+  const PointLight& pl = pointLights[delta];
   const Vec3 d = pl.position - ref;
   const float dist2 = glm::dot(d, d);
   if (!(dist2 > 0.0f)) return ls;
@@ -170,6 +188,7 @@ nlohmann::json Scene::statsJson() const {
   j["materials"] = materials.size();
   j["emissive_triangles"] = m_emissiveTris.size();
   j["point_lights"] = pointLights.size();
+  j["directional_lights"] = directionalLights.size();
   j["bounds_min"] = {m_bounds.lo.x, m_bounds.lo.y, m_bounds.lo.z};
   j["bounds_max"] = {m_bounds.hi.x, m_bounds.hi.y, m_bounds.hi.z};
   return j;

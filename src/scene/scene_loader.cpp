@@ -453,7 +453,20 @@ private:
   void parseLight(const json& j, const std::string& path) {
     Reader r(j, path, m_file);
     const std::string type = r.string("type", "", true);
-    if (type != "point") r.fail("unknown light type '" + type + "' (point; area lights are emissive shapes)", "type");
+    if (type == "directional") {
+      DirectionalLight dl;
+      const Vec3 d = r.vec3("direction", Vec3(0.0f), true);
+      if (!(glm::length(d) > 0.0f) || !isFinite(glm::normalize(d))) r.fail("must be a non-zero vector", "direction");
+      dl.direction = glm::normalize(d);
+      dl.irradiance = r.rgb("irradiance", Vec3(0.0f));
+      if (r.number("angle_deg", 0.0f, 0.0f, 90.0f) != 0.0f)
+        r.fail("a sun of finite size is not supported yet: give 0 (a delta light)", "angle_deg");
+      r.finish();
+      m_scene.directionalLights.push_back(dl);
+      return;
+    }
+    if (type != "point")
+      r.fail("unknown light type '" + type + "' (point, directional; area lights are emissive shapes)", "type");
     PointLight pl;
     pl.position = r.vec3("position", Vec3(0.0f), true);
     pl.intensity = r.rgb("intensity", Vec3(0.0f));
@@ -495,7 +508,7 @@ void finishScene(Scene& scene, const std::string& file) {
   if (scene.triangles.empty()) throw SceneError(file, "shapes", "the scene has no triangles");
   scene.finalize();
   checkScenePrecision(scene, file);
-  if (!scene.hasLights()) throw SceneError(file, "", "the scene has no light (no emissive surface, no point light)");
+  if (!scene.hasLights()) throw SceneError(file, "", "the scene has no light (no emissive surface, no point or directional light)");
 }
 
 }  // namespace detail

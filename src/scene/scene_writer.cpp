@@ -269,6 +269,9 @@ void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
   j["lights"] = nlohmann::json::array();
   for (const PointLight& pl : scene.pointLights)
     j["lights"].push_back({{"type", "point"}, {"position", cleanVec(pl.position)}, {"intensity", cleanVec(pl.intensity)}});
+  for (const DirectionalLight& dl : scene.directionalLights)
+    j["lights"].push_back(
+        {{"type", "directional"}, {"direction", cleanVec(dl.direction)}, {"irradiance", cleanVec(dl.irradiance)}});
   writeText(path, j.dump(2) + "\n");
 }
 
@@ -343,6 +346,12 @@ void writeMitsubaScene(const Scene& scene, const std::string& xmlPath) {
     os << "  <emitter type=\"point\">\n";
     os << "    <point name=\"position\" value=\"" << vecText(pl.position) << "\"/>\n";
     os << "    <rgb name=\"intensity\" value=\"" << vecText(pl.intensity) << "\"/>\n";
+    os << "  </emitter>\n";
+  }
+  for (const DirectionalLight& dl : scene.directionalLights) {
+    os << "  <emitter type=\"directional\">\n";
+    os << "    <vector name=\"direction\" value=\"" << vecText(dl.direction) << "\"/>\n";
+    os << "    <rgb name=\"irradiance\" value=\"" << vecText(dl.irradiance) << "\"/>\n";
     os << "  </emitter>\n";
   }
   os << "</scene>\n";

@@ -39,6 +39,8 @@ uint64_t voxel::fieldSceneHash(const Scene& scene) {
   }
   for (const PointLight& l : scene.pointLights)
     floats({l.position.x, l.position.y, l.position.z, l.intensity.x, l.intensity.y, l.intensity.z});
+  for (const DirectionalLight& l : scene.directionalLights)
+    floats({l.direction.x, l.direction.y, l.direction.z, l.irradiance.x, l.irradiance.y, l.irradiance.z});
   return h;
 }
 

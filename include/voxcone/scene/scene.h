@@ -24,6 +24,15 @@ struct PointLight {
   Vec3 intensity{0.0f};
 };
 
+/// A distant light (the sun as a delta light): parallel rays along `direction`, irradiance
+/// `irradiance` (W/m^2 per channel) on a surface facing them. Its flux, for choosing lights and
+/// emitting photons, is what crosses the scene's bounding sphere: irradiance * pi R^2 (pbrt-v4's
+/// DistantLight::Phi).
+struct DirectionalLight {
+  Vec3 direction{0.0f, -1.0f, 0.0f};  ///< unit, the direction the light travels
+  Vec3 irradiance{0.0f};
+};
+
 /// Settings a scene file may give and the command line may override.
 struct RenderSettings {
   int width = 256;
@@ -53,14 +62,14 @@ struct ShapeInfo {
 
 /// A light sample towards a shading point.
 struct LightSample {
-  Vec3 radiance{0.0f};   ///< Le (area) or I/r^2 (point) arriving along -wi, before visibility
+  Vec3 radiance{0.0f};   ///< Le (area), I/r^2 (point) or E (directional) arriving along -wi, before visibility
   Vec3 wi{0.0f};         ///< unit direction from the shading point to the light
   Vec3 lightPos{0.0f};   ///< sampled point on the light
   Vec3 lightPosError{0.0f};///< bound on lightPos's rounding error per axis (zero for point lights)
   Vec3 lightNormal{0.0f};///< geometric normal there (zero for point lights)
-  float distance = 0.0f;
+  float distance = 0.0f; ///< to lightPos (a directional light's: beyond the scene's bounds)
   float pdf = 0.0f;      ///< solid-angle pdf (including the light choice); 0 = failed
-  bool delta = false;    ///< point light (cannot be hit by BSDF sampling)
+  bool delta = false;    ///< point or directional light (cannot be hit by BSDF sampling)
 };
 
 /// The surface at a ray hit.
@@ -85,6 +94,7 @@ public:
   std::vector<ShapeInfo> shapes;
   std::vector<Material> materials;
   std::vector<PointLight> pointLights;
+  std::vector<DirectionalLight> directionalLights;
   Camera camera;
   RenderSettings render;
   std::string sourcePath;              ///< file the scene came from (for messages and sidecars)
@@ -108,8 +118,8 @@ public:
   /// Emitted radiance leaving an emissive surface towards direction `w` (unit, pointing away).
   Vec3 emitted(const SurfaceHit& hit, const Vec3& w) const;
 
-  // Lights. Every emissive triangle and every point light is one light; one is chosen in
-  // proportion to its power (luminance of emitted flux).
+  // Lights. Every emissive triangle, point light and directional light is one light; one is
+  // chosen in proportion to its power (luminance of emitted flux).
   size_t lightCount() const { return m_lightCdf.size(); }
   bool hasLights() const { return !m_lightCdf.empty(); }
   /// Sample a light towards `ref` with one 2D sample u: u.x chooses the light, then, rescaled to
@@ -136,7 +146,8 @@ private:
   std::vector<float> m_emissiveArea;       ///< per emissive triangle: its area
   std::vector<Vec3> m_emissiveNormal;      ///< per emissive triangle: its unit winding normal
   std::vector<float> m_lightCdf;           ///< cumulative power, normalized; lights are
-                                           ///< [emissive triangles..., point lights...]
+                                           ///< [emissive triangles..., point lights...,
+                                           ///<  directional lights...]
   std::vector<float> m_lightPmf;
   std::vector<int32_t> m_triLightIndex;    ///< per triangle: light index or -1
   float m_totalPower = 0.0f;
