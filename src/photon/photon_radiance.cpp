@@ -7,7 +7,6 @@
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -33,12 +32,6 @@ constexpr float kLift = 0.05f;
 constexpr int kAreaProbes = 8;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
 constexpr int kCacheCandidates = 8;
-/// Outside where PhotonRadianceSettings::cacheWhere asks for the cache, one in this many of the
-/// entries. Measured (small-objects, 256x256, 2 threads): with none there, the gathers that hit
-/// such places estimated in full, 0.15 -> 0.31 s; with every 4th, 44k entries instead of 55k
-/// (0.70-0.80 -> 0.63 s to make them) and the gathers as fast as with all; the image the same
-/// to 4 digits of relMSE.
-constexpr size_t kSparseEntries = 4;
 
 /// A hash of a point's coordinates to [0, 1): turns the probe spiral per point, deterministically.
 float pointHash(const Vec3& p) {
@@ -66,25 +59,41 @@ PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const Pho
   for (size_t i = 0; i < m_photons.size(); ++i) positions[i] = m_photons[i].position;
   m_tree = PhotonKdTree(positions);
   if (s.cacheStride <= 1) return;
-  // Every cacheStride-th photon on a diffuse surface (where cacheWhere does not accept it, every
-  // kSparseEntries-th of those), estimated on its own side from the other photons only; each
-  // entry alone, so the cache is the same at any thread count.
+  // Every cacheStride-th photon on a diffuse surface, estimated on its own side from the other
+  // photons only when a lookup first needs it (estimate()): most lookups need few of them.
   std::vector<uint32_t> at;
   for (size_t i = 0; i < m_photons.size(); i += size_t(s.cacheStride))
-    if (!isBlack(m_photons[i].albedo) && (!s.cacheWhere || (i / size_t(s.cacheStride)) % kSparseEntries == 0 ||
-                                          s.cacheWhere(m_photons[i].position, m_photons[i].normal)))
-      at.push_back(uint32_t(i));
+    if (!isBlack(m_photons[i].albedo)) at.push_back(uint32_t(i));
   m_cache.resize(at.size());
-  tbb::parallel_for(size_t(0), at.size(), [&](size_t e) {
-    const Photon& ph = m_photons[at[e]];
-    CacheEntry& c = m_cache[e];
-    c.position = ph.position;
-    c.normal = ph.normal;
-    c.irradiance = irradianceAt(ph.position, Vec3(0.0f), ph.normal, &c.radius, s.cacheStride);
-  });
+  for (size_t e = 0; e < at.size(); ++e) m_cache[e] = {m_photons[at[e]].position, m_photons[at[e]].normal};
+  m_estimates = std::make_unique<CacheEstimate[]>(m_cache.size());
+  m_estimateState = std::make_unique<std::atomic<uint8_t>[]>(m_cache.size());
+  for (size_t e = 0; e < m_cache.size(); ++e) m_estimateState[e].store(0, std::memory_order_relaxed);
   std::vector<Vec3> cachePositions(m_cache.size());
   for (size_t e = 0; e < m_cache.size(); ++e) cachePositions[e] = m_cache[e].position;
   m_cacheTree = PhotonKdTree(cachePositions);
+}
+
+PhotonRadiance::CacheEstimate PhotonRadiance::estimate(size_t e) const {
+  std::atomic<uint8_t>& state = m_estimateState[e];
+  if (state.load(std::memory_order_acquire) == 2) return m_estimates[e];
+  // Not made yet (or being written by another thread): make it here. Every thread makes the same
+  // value, so the one that publishes it does not matter.
+  const CacheEntry& c = m_cache[e];
+  CacheEstimate est;
+  est.irradiance = irradianceAt(c.position, Vec3(0.0f), c.normal, &est.radius, m_settings.cacheStride);
+  uint8_t expected = 0;
+  if (state.compare_exchange_strong(expected, 1, std::memory_order_acq_rel)) {
+    m_estimates[e] = est;
+    state.store(2, std::memory_order_release);
+  }
+  return est;
+}
+
+size_t PhotonRadiance::cacheEstimated() const {
+  size_t n = 0;
+  for (size_t e = 0; e < m_cache.size(); ++e) n += m_estimateState[e].load(std::memory_order_relaxed) == 2 ? 1 : 0;
+  return n;
 }
 
 size_t PhotonRadiance::memoryBytes() const {
@@ -187,7 +196,6 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
 }
 
 bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const {
-  // Outside where the cache is, the nearest entry passing the filters could lie far off.
   if (m_cache.empty()) return false;
   thread_local std::vector<KdNeighbor> near;
   const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;
@@ -197,17 +205,18 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
   // low estimates: -13% at k = 8.)
   for (const KdNeighbor& n : near) {
     const CacheEntry& c = m_cache[n.index];
-    if (!(c.radius > 0.0f)) continue;
     if (glm::dot(c.normal, side) <= kSameSurfaceCos) continue;
-    if (std::abs(glm::dot(c.position - x, side)) > kPlaneSlab * c.radius) continue;
-    const float lift = kLift * c.radius;
+    const CacheEstimate est = estimate(n.index);
+    if (!(est.radius > 0.0f)) continue;
+    if (std::abs(glm::dot(c.position - x, side)) > kPlaneSlab * est.radius) continue;
+    const float lift = kLift * est.radius;
     const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
     Ray ray;
     ray.origin = from;
     ray.dir = c.position + c.normal * lift - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
-    out = c.irradiance;
+    out = est.irradiance;
     return true;
   }
   return false;

@@ -77,28 +77,6 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
   m_keys.erase(std::unique(m_keys.begin(), m_keys.end()), m_keys.end());
 }
 
-SeenRegion SeenRegion::dilated() const {
-  SeenRegion out;
-  out.m_cellSize = m_cellSize;
-  out.m_origin = m_origin;
-  constexpr uint64_t kMax = (uint64_t(1) << 21) - 1;
-  out.m_keys.reserve(m_keys.size() * 27);
-  for (uint64_t key : m_keys) {
-    const uint64_t c[3] = {key >> 42, (key >> 21) & kMax, key & kMax};
-    for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int64_t n[3] = {int64_t(c[0]) + dx, int64_t(c[1]) + dy, int64_t(c[2]) + dz};
-          if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] > int64_t(kMax) || n[1] > int64_t(kMax) || n[2] > int64_t(kMax))
-            continue;
-          out.m_keys.push_back((uint64_t(n[0]) << 42) | (uint64_t(n[1]) << 21) | uint64_t(n[2]));
-        }
-  }
-  std::sort(out.m_keys.begin(), out.m_keys.end());
-  out.m_keys.erase(std::unique(out.m_keys.begin(), out.m_keys.end()), out.m_keys.end());
-  return out;
-}
-
 bool SeenRegion::contains(const Vec3& worldPos) const {
   return std::binary_search(m_keys.begin(), m_keys.end(), keyOf(worldPos));
 }

@@ -22,7 +22,8 @@
 /// option: the estimate above costs a k-nearest search, up to k visibility rays and the disc's
 /// coverage probes, and every cone of a gather asks for one (70% of a render's time on the
 /// failure suite). With `cacheStride` it is computed once at every cacheStride-th photon, on
-/// that photon's side, and a point takes the nearest such entry that passes the same filters
+/// that photon's side (when a lookup first needs it: small-objects estimates 37k of its 55k
+/// entries), and a point takes the nearest such entry that passes the same filters
 /// (its side, its tangent plane, in sight: one ray); where none does (a room no photon reached)
 /// the full estimate runs: 4x faster gathers. An entry is estimated from the other photons only
 /// (those whose index is not a multiple of the stride, carrying the left-out flux): estimated
@@ -34,7 +35,8 @@
 #include "voxcone/photon/photon_kdtree.h"
 #include "voxcone/photon/photon_tracer.h"
 
-#include <functional>
+#include <atomic>
+#include <memory>
 #include <vector>
 
 namespace voxcone {
@@ -53,10 +55,6 @@ struct PhotonRadianceSettings {
   /// Irradiance precomputed at every cacheStride-th photon (0 or 1: none, every point estimates
   /// in full).
   int cacheStride = 0;
-  /// Where the cache is dense: every cacheStride-th photon (position, normal) this accepts is an
-  /// entry, and a sparser set of the others (a point there, rarely asked for, takes a farther
-  /// entry); none: dense everywhere.
-  std::function<bool(const Vec3& position, const Vec3& normal)> cacheWhere{};
   /// Leave out the global photons straight from a light (bounces 0): the estimate is then the
   /// light that bounced at least once, for callers that take direct light by shadow rays.
   bool indirectOnly = false;
@@ -80,8 +78,9 @@ public:
   Vec3 radiance(const SurfaceHit& hit, const Vec3& side) const;
   /// Bytes held (photons, the cache and their trees).
   size_t memoryBytes() const;
-  /// Entries of the precomputed irradiance.
+  /// Entries of the precomputed irradiance, and how many of them lookups have estimated so far.
   size_t cacheSize() const { return m_cache.size(); }
+  size_t cacheEstimated() const;
 
 private:
   /// The fraction of the disc of radius r around `hit` (in its tangent plane, side `side`) that
@@ -99,11 +98,18 @@ private:
   /// or false.
   bool cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const;
 
-  /// One precomputed estimate: at a photon's position, on its side.
+  /// One precomputed estimate: at a photon's position, on its side. Its estimate is made when a
+  /// lookup first needs it (entry()): a pure function of the photons, so the same whichever
+  /// thread makes it first.
   struct CacheEntry {
-    Vec3 position{0.0f}, normal{0.0f}, irradiance{0.0f};
+    Vec3 position{0.0f}, normal{0.0f};
+  };
+  struct CacheEstimate {
+    Vec3 irradiance{0.0f};
     float radius = 0.0f;  ///< the estimate's disc
   };
+  /// Entry e's estimate, made now if no lookup made it before.
+  CacheEstimate estimate(size_t e) const;
 
   const Scene* m_scene = nullptr;
   const Accel* m_accel = nullptr;
@@ -111,6 +117,9 @@ private:
   std::vector<Photon> m_photons;
   PhotonKdTree m_tree;
   std::vector<CacheEntry> m_cache;
+  /// Per entry: its estimate and its state (0 none, 1 being written, 2 written).
+  mutable std::unique_ptr<CacheEstimate[]> m_estimates;
+  mutable std::unique_ptr<std::atomic<uint8_t>[]> m_estimateState;
   PhotonKdTree m_cacheTree;
 };
 

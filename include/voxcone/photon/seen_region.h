@@ -28,8 +28,6 @@ public:
   /// Deterministic (no randomness; any thread count).
   SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX = 64,
              int raysY = 64, int gathers = 16);
-  /// The same cells and their 26 neighbours each.
-  SeenRegion dilated() const;
   /// Whether worldPos lies in a seen cell.
   bool contains(const Vec3& worldPos) const;
   /// Photons of `photons` in seen cells that bounced at least `minBounces` times.

@@ -45,6 +45,7 @@ nlohmann::json VoxelConeIntegrator::statsJson() const {
   j["field_bytes"] = m_field.memoryBytes();
   j["hit_photon_bytes"] = m_hitPhotons.memoryBytes();
   j["hit_cache_entries"] = m_hitPhotons.cacheSize();
+  j["hit_cache_estimated"] = m_hitPhotons.cacheEstimated();
   for (int level : m_field.levels()) j["active_voxels"][std::to_string(level)] = m_field.activeVoxels(level);
   return j;
 }
@@ -58,7 +59,6 @@ void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
 
 PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   m_stats = nlohmann::json::object();
-  m_seen.reset();
   PhotonSettings pilot = m_settings.photons;
   const bool guided = m_settings.photonTarget > 0 && m_settings.guideFloor > 0.0 && m_settings.guideFloor < 1.0;
   // The pilot names the bin of the finest guide's layout each photon left in (its photons are
@@ -77,8 +77,7 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   // diameter, about the photon estimate's search radius (hit_radius).
   Timer t;
   const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
-  m_seen = std::make_shared<const SeenRegion>(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
-  const SeenRegion& seen = *m_seen;
+  const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
   // The photons the estimates use: with direct light by shadow rays, those that bounced.
   const int minBounces = m_settings.hitEstimate.indirectOnly ? 1 : 0;
   std::vector<double> useful(guided ? pilot.guide->bins() : 0, 0.0);
@@ -155,14 +154,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   m_tracer.reset();
   if (m_settings.hitPhotons) {
     Timer kd;
-    PhotonRadianceSettings estimate = m_settings.hitEstimate;
-    // The precomputed estimates where the camera's gathers read, and a cell around (elsewhere,
-    // rarely asked for, a point estimates in full).
-    if (m_seen)
-      estimate.cacheWhere = [near = std::make_shared<const SeenRegion>(m_seen->dilated())](const Vec3& p, const Vec3&) {
-        return near->contains(p);
-      };
-    m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, estimate);
+    m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
   const uint64_t photonPeak = peakRssBytes();

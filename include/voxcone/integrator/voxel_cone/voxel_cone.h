@@ -131,10 +131,8 @@
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
-#include "voxcone/photon/seen_region.h"
 #include "voxcone/voxel/voxel_field.h"
 
-#include <memory>
 #include <optional>
 
 namespace voxcone {
@@ -180,7 +178,7 @@ private:
              const Vec3& weight, int depth) const;
   /// The photon maps: settings.photons photons, or with a photon target as many as put that
   /// many in the cells the camera's gathers read (a pilot pass, then the count its share
-  /// needs). Starts m_stats with the seen cells and photons; keeps the seen cells in m_seen.
+  /// needs). Starts m_stats with the seen cells and photons.
   PhotonMaps tracePhotonsForView(Progress* progress);
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
@@ -200,8 +198,6 @@ private:
 
   VoxelField m_field;
   PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
-  /// The cells the camera's gathers read (with a photon target): the estimate's cache is there.
-  std::shared_ptr<const SeenRegion> m_seen;
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
   nlohmann::json m_stats = nlohmann::json::object();
