@@ -7,7 +7,6 @@
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -99,7 +98,7 @@ size_t PhotonRadiance::cacheEstimated() const {
 size_t PhotonRadiance::memoryBytes() const {
   // The tree keeps a position, an index and an axis per photon.
   return m_photons.size() * (sizeof(Photon) + sizeof(Vec3) + sizeof(uint32_t) + 1) +
-         m_cache.size() * (sizeof(CacheEntry) + sizeof(Vec3) + sizeof(uint32_t) + 1);
+         m_cache.size() * (sizeof(CacheEntry) + sizeof(CacheEstimate) + 1 + sizeof(Vec3) + sizeof(uint32_t) + 1);
 }
 
 float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r,

@@ -99,7 +99,7 @@ private:
   bool cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const;
 
   /// One precomputed estimate: at a photon's position, on its side. Its estimate is made when a
-  /// lookup first needs it (entry()): a pure function of the photons, so the same whichever
+  /// lookup first needs it (estimate()): a pure function of the photons, so the same whichever
   /// thread makes it first.
   struct CacheEntry {
     Vec3 position{0.0f}, normal{0.0f};
