@@ -177,9 +177,7 @@ TEST(EmissionGuide, GuidedPhotonsCarryTheClosedFormFlux) {
   // one: the plane absorbs).
   const Scene scene = pointOverPlane();
   const Hbvh accel(scene);
-  PhotonSettings pilot;
-  pilot.photons = 20000;
-  pilot.causticPhotons = 0;
+  PhotonSettings pilot = test::photonSettings(20000, 0);
   pilot.guide = std::make_shared<EmissionGuide>(1, 16);
   pilot.recordBins = true;
   const PhotonMaps p = tracePhotons(scene, accel, pilot);

@@ -43,14 +43,7 @@ std::string hquad(float y, float h, const std::string& material, bool up) {
   return R"({"type": "quad", "material": ")" + material + R"(", "vertices": [)" + verts + "]}";
 }
 
-PhotonSettings settings(uint64_t photons, uint64_t caustic, int maxDepth = 16, uint64_t seed = 0) {
-  PhotonSettings s;
-  s.photons = photons;
-  s.causticPhotons = caustic;
-  s.maxDepth = maxDepth;
-  s.seed = seed;
-  return s;
-}
+using test::photonSettings;
 
 DVec3 totalPower(const std::vector<Photon>& photons) {
   DVec3 s(0.0);
@@ -67,7 +60,7 @@ TEST(PhotonEmission, CornellBoxFluxIsPiLeArea) {
   // The Cornell light: Le = (17, 12, 4) on a 130 x 105 quad, one-sided: flux pi Le A.
   const Scene scene = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
   const Hbvh accel(scene);
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(20000, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(20000, 0));
   const DVec3 expected = double(kPi) * DVec3(17.0, 12.0, 4.0) * (130.0 * 105.0);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(maps.stats.emittedPower[c], expected[c], 1e-4 * expected[c]) << c;
   EXPECT_EQ(maps.stats.emittedGlobal, 20000u);
@@ -84,7 +77,7 @@ TEST(PhotonEmission, AbsorbingSphereStoresPointLightFluxOnce) {
   const Scene scene = test::furnaceScene(0.0f, 0.0f, intensity, 3);
   const Hbvh accel(scene);
   const uint64_t n = 50000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0));
   ASSERT_EQ(maps.global.size(), n);
   const double flux = 4.0 * kPi * intensity;
   const DVec3 sum = totalPower(maps.global);
@@ -103,7 +96,7 @@ TEST(PhotonEmission, AbsorbingSphereStoresColouredPatchFluxOnce) {
       "");
   const Hbvh accel(scene);
   const uint64_t n = 50000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0));
   const DVec3 flux = double(kPi) * DVec3(17.0, 12.0, 4.0) * 0.25;
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(maps.stats.emittedPower[c], flux[c], 1e-5 * flux[c]);
   ASSERT_EQ(maps.global.size(), n);
@@ -124,7 +117,7 @@ TEST(PhotonEmission, MixedColourLightsCarryExpectedFluxPerChannel) {
       R"({"type": "point", "position": [0, 0.5, 0], "intensity": [1, 0, 0]})");
   const Hbvh accel(scene);
   const uint64_t n = 100000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0));
   const double red = 4.0 * kPi, blue = kPi * 20.0 * 0.25;
   const double pRed = 0.2126 * red / (0.2126 * red + 0.0722 * blue);
   const DVec3 sum = totalPower(maps.global);
@@ -150,7 +143,7 @@ TEST(PhotonEmission, OneAndTwoSidedEmitters) {
         "");
     const Hbvh accel(scene);
     const uint64_t n = 40000;
-    const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0));
+    const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0));
     const double flux = kPi * 2.0 * 1.0 * (twoSided ? 2.0 : 1.0);
     EXPECT_NEAR(maps.stats.emittedPower.x, flux, 1e-5 * flux);
     uint64_t floorCount = 0;
@@ -185,7 +178,7 @@ TEST(PhotonTracer, RussianRouletteConservesPowerInClosedSphere) {
                                 R"({"type": "point", "position": [0.1, 0.2, -0.1], "intensity": 1})");
   const Hbvh accel(scene);
   const uint64_t n = 200000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0, 200));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0, 200));
   const double flux = 4.0 * kPi;
   const DVec3 albedo(0.5, 0.8, 0.2);
   const DVec3 sum = totalPower(maps.global);
@@ -204,7 +197,7 @@ TEST(PhotonTracer, GreyFurnaceKeepsPhotonPowerConstant) {
   const Scene scene = test::furnaceScene(0.5f, 0.0f, 1.0f, 3);
   const Hbvh accel(scene);
   const uint64_t n = 50000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0, 200));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0, 200));
   const float perPhoton = float(4.0 * kPi / n);
   for (const Photon& p : maps.global) ASSERT_NEAR(p.power.y, perPhoton, 1e-5f * perPhoton);
   const DVec3 sum = totalPower(maps.global);
@@ -222,7 +215,7 @@ TEST(PhotonTracer, PointLightIrradianceOnPlane) {
                                 R"({"type": "point", "position": [0, 1, 0], "intensity": 2})");
   const Hbvh accel(scene);
   const uint64_t n = 1000000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, 0));
   struct Patch {
     double x0, x1, z0, z1;
   };
@@ -277,7 +270,7 @@ TEST(PhotonCaustics, GlassSphereFocusesCausticsUnderIt) {
   const Scene scene = glassScene(0.0f);
   const Hbvh accel(scene);
   const uint64_t n = 100000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, n));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, n));
   ASSERT_GT(maps.caustic.size(), 1000u);
   const float perPhoton = float(4.0 * kPi * 10.0 / n);
   // No global photon in the shadow (they would be L S+ D); all carry the unbounced power.
@@ -319,7 +312,7 @@ TEST(PhotonCaustics, AimedCausticPhotonsCarryTheSameFluxAsUnaimedOnes) {
   const Scene scenes[2] = {glassScene(0.0f), makeScene(glass, shapes + ", " + hquad(5.0f, 0.5f, "lamp", false), "")};
   for (const Scene& scene : scenes) {
     const Hbvh accel(scene);
-    PhotonSettings aimed = settings(0, 200000), plain = aimed;
+    PhotonSettings aimed = photonSettings(0, 200000), plain = aimed;
     plain.aimCaustics = false;
     const PhotonMaps a = tracePhotons(scene, accel, aimed), b = tracePhotons(scene, accel, plain);
     ASSERT_GT(b.caustic.size(), 2000u);
@@ -342,7 +335,7 @@ TEST(PhotonCaustics, NoSpecularMaterialsGiveNoCausticPhotons) {
   {
     const Scene scene = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
     const Hbvh accel(scene);
-    const PhotonMaps maps = tracePhotons(scene, accel, settings(5000, 20000));
+    const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(5000, 20000));
     EXPECT_TRUE(maps.caustic.empty());
     EXPECT_EQ(maps.stats.storedCaustic, 0u);
     EXPECT_EQ(maps.stats.emittedCaustic, 20000u);
@@ -350,7 +343,7 @@ TEST(PhotonCaustics, NoSpecularMaterialsGiveNoCausticPhotons) {
   {
     const Scene scene = glassScene(0.5f, R"({"type": "rough_dielectric", "ior": 1.5, "roughness": 0.3})");
     const Hbvh accel(scene);
-    const PhotonMaps maps = tracePhotons(scene, accel, settings(20000, 20000));
+    const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(20000, 20000));
     EXPECT_TRUE(maps.caustic.empty());
     // Light through the rough sphere reaches its shadow in the global map instead.
     size_t inShadow = 0;
@@ -367,7 +360,7 @@ TEST(PhotonCaustics, GlobalMapExcludesCausticPaths) {
   const Scene scene = glassScene(0.8f);
   const Hbvh accel(scene);
   const uint64_t n = 100000;
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(n, n));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(n, n));
   double globalCore = 0.0, causticCore = 0.0;
   for (const Photon& p : maps.global)
     if (horizontalRadius(p.position) < 0.5) globalCore += p.power.x;
@@ -395,7 +388,7 @@ bool samePhotons(const std::vector<Photon>& a, const std::vector<Photon>& b) {
 TEST(PhotonTracer, IdenticalMapsAtAnyThreadCount) {
   const Scene scene = glassScene(0.6f);
   const Hbvh accel(scene);
-  const PhotonSettings s = settings(30000, 30000, 16, 7);
+  const PhotonSettings s = photonSettings(30000, 30000, 16, 7);
   PhotonMaps one, two;
   {
     ThreadLimit limit(1);
@@ -410,7 +403,7 @@ TEST(PhotonTracer, IdenticalMapsAtAnyThreadCount) {
   EXPECT_TRUE(samePhotons(one.global, two.global));
   EXPECT_TRUE(samePhotons(one.caustic, two.caustic));
   // Another seed gives another map.
-  const PhotonMaps other = tracePhotons(scene, accel, settings(30000, 30000, 16, 8));
+  const PhotonMaps other = tracePhotons(scene, accel, photonSettings(30000, 30000, 16, 8));
   EXPECT_FALSE(samePhotons(one.global, other.global));
 }
 
@@ -425,7 +418,7 @@ TEST(PhotonTracer, NoLightsGiveEmptyMaps) {
   black.finalize();
   for (const Scene* s : {&scene, &black}) {
     const Hbvh accel(*s);
-    const PhotonMaps maps = tracePhotons(*s, accel, settings(1000, 1000));
+    const PhotonMaps maps = tracePhotons(*s, accel, photonSettings(1000, 1000));
     EXPECT_TRUE(maps.global.empty());
     EXPECT_TRUE(maps.caustic.empty());
     EXPECT_EQ(maps.stats.emittedGlobal, 0u);
@@ -436,7 +429,7 @@ TEST(PhotonTracer, NoLightsGiveEmptyMaps) {
 TEST(PhotonTracer, PhotonsAreValidInCornellBox) {
   const Scene scene = loadScene(test::sourceDir() + "/data/scenes/cornell-box.json");
   const Hbvh accel(scene);
-  const PhotonMaps maps = tracePhotons(scene, accel, settings(50000, 0));
+  const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(50000, 0));
   Bounds3 box = scene.bounds();
   for (const Photon& p : maps.global) {
     ASSERT_TRUE(isFinite(p.power) && isFinite(p.position));
@@ -476,7 +469,7 @@ TEST(PhotonTracer, ProgressAndCancel) {
   const Hbvh accel(scene);
   {
     CountingProgress prog;
-    const PhotonMaps maps = tracePhotons(scene, accel, settings(10000, 5000), &prog);
+    const PhotonMaps maps = tracePhotons(scene, accel, photonSettings(10000, 5000), &prog);
     EXPECT_EQ(prog.stage, "photons");
     EXPECT_EQ(prog.total, 15000u);
     EXPECT_EQ(prog.done.load(), 15000u);
@@ -492,7 +485,7 @@ TEST(PhotonTracer, ProgressAndCancel) {
   {
     CountingProgress prog;
     prog.cancelAfter = 0;
-    EXPECT_THROW(tracePhotons(scene, accel, settings(100000, 0), &prog), CancelledError);
+    EXPECT_THROW(tracePhotons(scene, accel, photonSettings(100000, 0), &prog), CancelledError);
   }
 }
 

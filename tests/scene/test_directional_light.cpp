@@ -80,9 +80,7 @@ TEST(DirectionalLight, PhotonsCarryECosTimesTheFloorsArea) {
   // it with probability p = 16 * 0.5 / (pi R^2): 5 sigma of the binomial count.
   const Scene scene = sunScene();
   const Hbvh accel(scene);
-  PhotonSettings s;
-  s.photons = 200000;
-  s.causticPhotons = 0;
+  const PhotonSettings s = test::photonSettings(200000, 0);
   const PhotonMaps maps = tracePhotons(scene, accel, s);
   double red = 0.0;
   for (const Photon& p : maps.global) red += p.power.x;

@@ -1,6 +1,7 @@
 #pragma once
 // Small scenes built in code for the tests.
 
+#include "voxcone/photon/photon_tracer.h"
 #include "voxcone/scene/scene.h"
 
 #include <cmath>
@@ -30,6 +31,16 @@ inline Scene furnaceScene(float albedo, float emission, float pointIntensity, in
                            R"(]
   })";
   return parseScene(json, "furnace", ".");
+}
+
+/// Photon tracing settings: `photons` global and `caustic` caustic photons, the rest given.
+inline PhotonSettings photonSettings(uint64_t photons, uint64_t caustic, int maxDepth = 16, uint64_t seed = 0) {
+  PhotonSettings s;
+  s.photons = photons;
+  s.causticPhotons = caustic;
+  s.maxDepth = maxDepth;
+  s.seed = seed;
+  return s;
 }
 
 /// Solid angle of the rectangle [x0, x1] x [z0, z1] in the plane y = 0 seen from (0, h, 0):
