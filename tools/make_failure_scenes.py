@@ -12,6 +12,8 @@ defaults (metres, +y up, 256x256, 16 spp, the project's JSON format):
                     "sun" (an emitting quad) 4 m above an opening in the slab
   small-objects     a 5.5 m room with red and green walls; a cup, a knot and a cube (each under
                     2% of the room) on a table, seen from 0.6 m
+  sky-room          a closed room with 0.15 m walls in the open, lit only through one window by
+                    a constant sky and a sun (a directional light), a ground outside
 
 --variant N (N > 0) writes scenes of the same kinds with other dimensions, wall thickness,
 light and camera placements, drawn from N (for checks on scenes the defaults were not tuned on;
@@ -148,6 +150,54 @@ def sunlit_hall(rng):
     return scene(cam, {}, shapes, [3000, 2800, 2400])
 
 
+def sky_room(rng):
+    """A 5 x 2.7 x 4 m room (x, y, z) closed on every side but a window in its +z wall, in the
+    open under a constant sky and a sun: a ground outside, walls 0.15 m thick. Everything the
+    room receives comes through the window: sky light, the sun's patch on the floor, and the
+    ground's light."""
+    w = 5.0 if rng is None else rng.uniform(3.5, 6.0)
+    h = 2.7 if rng is None else rng.uniform(2.4, 3.2)
+    d = 4.0 if rng is None else rng.uniform(3.0, 5.5)
+    t = 0.15 if rng is None else rng.choice([0.01, 0.05, 0.15, 0.3])
+    win_w = 1.6 if rng is None else rng.uniform(0.8, 2.2)
+    win_h = 1.2 if rng is None else rng.uniform(0.8, 1.5)
+    win_x = 0.5 * w if rng is None else rng.uniform(0.3, 0.7) * w
+    sill = 0.9 if rng is None else rng.uniform(0.5, 1.0)
+    sill = min(sill, h - win_h - 0.2)
+    shapes = room("room", [0, 0, 0], [w, h, d], {"xm": "red", "xp": "green"}, skip=("zp",))
+    # The window wall, z in [d, d + t], as four boxes around the opening; its inside face is the
+    # boxes' -z faces.
+    x0, x1 = win_x - 0.5 * win_w, win_x + 0.5 * win_w
+    shapes += box("wall_left", "white", [0, 0, d], [x0, h, d + t])
+    shapes += box("wall_right", "white", [x1, 0, d], [w, h, d + t])
+    shapes += box("wall_below", "white", [x0, 0, d], [x1, sill, d + t])
+    shapes += box("wall_above", "white", [x0, sill + win_h, d], [x1, h, d + t])
+    # The room's shell from outside: the other walls', the roof's and the floor's outer faces
+    # (a slab of the same thickness), so that the sky lights them as it would a house.
+    shapes += box("shell_left", "white", [-t, -t, -t], [0, h + t, d + t])
+    shapes += box("shell_right", "white", [w, -t, -t], [w + t, h + t, d + t])
+    shapes += box("shell_back", "white", [0, -t, -t], [w, h + t, 0])
+    shapes += box("shell_roof", "white", [0, h, 0], [w, h + t, d])
+    shapes += box("shell_floor", "white", [0, -t, 0], [w, 0, d])
+    # The ground in front of the window, 8 m out, a little below the floor's top.
+    g = 8.0
+    shapes.append(quad("ground", "ground", [[-t - 2, -t, d + t], [-t - 2, -t, d + t + g], [w + t + 2, -t, d + t + g],
+                                            [w + t + 2, -t, d + t]]))
+    elev = 40.0 if rng is None else rng.uniform(25.0, 60.0)
+    az = 20.0 if rng is None else rng.uniform(-35.0, 35.0)
+    e, a = math.radians(elev), math.radians(az)
+    # The direction the sunlight travels: down and into the room (-z), turned by az about +y.
+    direction = [round(-math.cos(e) * math.sin(a), 6), round(-math.sin(e), 6), round(-math.cos(e) * math.cos(a), 6)]
+    sky = [0.5, 0.65, 1.0] if rng is None else [round(v * rng.uniform(0.6, 1.5), 3) for v in (0.5, 0.65, 1.0)]
+    lights = [{"type": "environment", "radiance": sky},
+              {"type": "directional", "direction": direction, "irradiance": [12.0, 11.0, 9.6]}]
+    cam = {"position": [0.25 * w, 1.5, 0.3], "target": [0.6 * w, 0.6, d], "up": [0, 1, 0], "fov_y_deg": 65}
+    out = scene(cam, {"ground": {"type": "lambertian", "albedo": [0.3, 0.28, 0.22]}}, shapes, [0, 0, 0])
+    del out["materials"]["light"]
+    out["lights"] = lights
+    return out
+
+
 def torus_knot(p=2, q=3, radius=1.0, tube=0.28, seg=160, ring=12):
     """A (p, q) torus knot tube: vertices and quads (wound outwards)."""
     def curve(s):
@@ -255,7 +305,7 @@ def main():
     verts, quads, tris = cup()
     write_obj(os.path.join(mesh_dir, "cup.obj"), verts, quads, tris)
     scenes = {"two-rooms-door": two_rooms(rng, False), "two-rooms-closed": two_rooms(rng, True),
-              "sunlit-hall": sunlit_hall(rng), "small-objects": small_objects(rng, mesh_dir)}
+              "sunlit-hall": sunlit_hall(rng), "small-objects": small_objects(rng, mesh_dir), "sky-room": sky_room(rng)}
     if args.variant:
         # Mesh paths relative to the output folder.
         for s in scenes.values():

@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 
 PACKAGES=(build-essential cmake ninja-build pkg-config git
   libopenvdb-dev libopenvdb-tools libboost-iostreams-dev libopenimageio-dev libopenexr-dev libpng-dev libjpeg-dev zlib1g-dev libglm-dev libtbb-dev
-  libtinyobjloader-dev libcli11-dev nlohmann-json3-dev libpugixml-dev libgtest-dev libbenchmark-dev libxxhash-dev)
+  libtinyobjloader-dev libtinygltf-dev libstb-dev libcli11-dev nlohmann-json3-dev libpugixml-dev libgtest-dev libbenchmark-dev libxxhash-dev)
 
 install_deps() {
   local missing=()

@@ -20,7 +20,7 @@ void addInfoCommand(CLI::App& app) {
   };
   auto o = std::make_shared<Opts>();
   CLI::App* cmd = app.add_subcommand("info", "Print scene, mesh and HBVH statistics");
-  cmd->add_option("scene", o->scene, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required()->default_str("");
+  cmd->add_option("scene", o->scene, "Scene file (JSON, Mitsuba 3 XML: .xml, or glTF 2.0: .gltf, .glb)")->required()->default_str("");
   addDefineOption(*cmd, o->defines);
   cmd->add_flag("--json", o->json, "Print JSON instead of a table");
   cmd->add_option("-t,--threads", o->threads, "Threads for the HBVH build (0 = all)")->check(CLI::Range(0, 4096));

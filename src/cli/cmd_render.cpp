@@ -309,7 +309,7 @@ void runRender(const RenderOptions& o) {
 void addRenderCommand(CLI::App& app) {
   auto o = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand("render", "Render a scene to EXR, PNG and a JSON sidecar");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->default_str("the built-in cornell-box");
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON, Mitsuba 3 XML: .xml, or glTF 2.0: .gltf, .glb)")->default_str("the built-in cornell-box");
   addDefineOption(*cmd, o->defines);
   cmd->add_option("-o,--output", o->output, "Output stem (or STEM.exr/.png/.json): STEM.exr, STEM.png and STEM.json are written; any other extension is an error")
       ->check(nonEmpty())

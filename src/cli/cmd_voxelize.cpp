@@ -161,7 +161,7 @@ void runVoxelize(const VoxelizeOptions& o) {
 void addVoxelizeCommand(CLI::App& app) {
   auto o = std::make_shared<VoxelizeOptions>();
   CLI::App* cmd = app.add_subcommand("voxelize", "Trace photons, voxelize into OpenVDB grids with mips, write a .vdb");
-  cmd->add_option("scene", o->scenePath, "Scene file (JSON, or Mitsuba 3 XML: .xml)")->required();
+  cmd->add_option("scene", o->scenePath, "Scene file (JSON, Mitsuba 3 XML: .xml, or glTF 2.0: .gltf, .glb)")->required();
   addDefineOption(*cmd, o->defines);
   cmd->add_option("--level", o->level, "Finest level: 2^L voxels across the longest axis")->check(CLI::Range(1, 13));
   cmd->add_option("--coarsest-level", o->coarsest, "Coarsest mip level built")->check(CLI::Range(0, 13));

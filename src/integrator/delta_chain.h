@@ -10,7 +10,8 @@
 
 namespace voxcone {
 
-/// Radiance along `ray`: emission at every hit (when `withEmission`), `shade(hit, wo, sampler,
+/// Radiance along `ray`: emission at every hit and the environment where it leaves the scene
+/// (when `withEmission`), `shade(hit, wo, sampler,
 /// depth, weight)` at the first non-delta surface (depth 0: the ray's own first hit; weight:
 /// the product of the delta lobes' weights that led there), and at delta surfaces every lobe
 /// followed (reflection and refraction both, for glass) up to `maxDepth` segments. With
@@ -29,14 +30,17 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sa
                       int depth = 0, float throughput = 1.0f, const Vec3& weight = Vec3(1.0f),
                       bool* metGlass = nullptr) {
   SurfaceHit sh;
-  if (!intersectSurface(scene, accel, ray, sh)) return Vec3(0.0f);
+  const bool hit = intersectSurface(scene, accel, ray, sh);
   const Vec3 woWorld = -glm::normalize(ray.dir);
-  Vec3 L = withEmission ? scene.emitted(sh, woWorld) : Vec3(0.0f);
+  // Emission at the hit, or the environment where the ray leaves the scene.
+  Vec3 L = !withEmission ? Vec3(0.0f) : hit ? scene.emitted(sh, woWorld) : scene.escaped(-woWorld);
   if (terms) {
     terms->emitted += weight * L;
     if (depth > 0) terms->glint += weight * L;
   }
-  const Material& mat = scene.materials[sh.material];
+  if (!hit) return L;
+  Material textured;
+  const Material& mat = scene.materialAt(sh, textured);
   if (!mat.isDelta()) return L + shade(sh, woWorld, sampler, depth, weight);
   if (metGlass && mat.isTransmissive()) *metGlass = true;
   if (depth + 1 >= maxDepth) return L;

@@ -43,7 +43,17 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
 
   for (int depth = 0;; ++depth) {
     SurfaceHit sh;
-    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) {
+      // The ray leaves the scene: the environment's radiance, MIS-weighted as emission is.
+      const Vec3 dir = glm::normalize(ray.dir);
+      const Vec3 Le = m_scene.escaped(dir);
+      if (!isBlack(Le)) {
+        const Vec3 c = specularBounce || !m_nee ? beta * Le : beta * Le * powerHeuristic(prevPdf, m_scene.escapedPdf(dir));
+        L += c;
+        if (terms) *term(deltaSinceDiffuse) += c;
+      }
+      break;
+    }
     const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
 
@@ -62,7 +72,8 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
     }
     if (depth + 1 >= m_maxDepth) break;
 
-    const Material& mat = m_scene.materials[sh.material];
+    Material textured;
+    const Material& mat = m_scene.materialAt(sh, textured);
     const Frame frame(sh.shadingNormal);
     const Vec3 wo = frame.toLocal(woWorld);
 

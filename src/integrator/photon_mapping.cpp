@@ -95,7 +95,8 @@ Vec3 PhotonMappingIntegrator::estimate(const PhotonKdTree& tree, const std::vect
   const float r2 = found == static_cast<size_t>(m_k) ? neighbors.back().dist2 : maxDist2;
   if (!(r2 > 0.0f)) return Vec3(0.0f);
 
-  const Material& mat = m_scene.materials[hit.material];
+  Material textured;
+  const Material& mat = m_scene.materialAt(hit, textured);
   const Frame frame(hit.shadingNormal);
   const Vec3 wo = frame.toLocal(woWorld);
   // The viewer's side of the surface: photons that arrived on the other side of a thin wall
@@ -120,10 +121,14 @@ Vec3 PhotonMappingIntegrator::gather(Ray ray, Sampler& sampler, int depth) const
   bool seenGlossy = false, countEmission = false;
   for (; depth < m_maxDepth; ++depth) {
     SurfaceHit sh;
-    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) {
+      if (countEmission) L += beta * m_scene.escaped(glm::normalize(ray.dir));
+      break;
+    }
     const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
-    const Material& mat = m_scene.materials[sh.material];
+    Material textured;
+    const Material& mat = m_scene.materialAt(sh, textured);
     if (countEmission) L += beta * m_scene.emitted(sh, woWorld);
     // Diffuse: the full radiance estimate (direct photons included) plus caustics here.
     if (mat.isDiffuse())
@@ -153,10 +158,14 @@ Vec3 PhotonMappingIntegrator::li(const Ray& cameraRay, Sampler& sampler) const {
   bool countEmission = true;
   for (int depth = 0;; ++depth) {
     SurfaceHit sh;
-    if (!intersectSurface(m_scene, m_accel, ray, sh)) break;
+    if (!intersectSurface(m_scene, m_accel, ray, sh)) {
+      if (countEmission) L += beta * m_scene.escaped(glm::normalize(ray.dir));
+      break;
+    }
     const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
-    const Material& mat = m_scene.materials[sh.material];
+    Material textured;
+    const Material& mat = m_scene.materialAt(sh, textured);
     if (countEmission) L += beta * m_scene.emitted(sh, woWorld);
 
     if (!mat.isDelta()) {

@@ -35,6 +35,7 @@ struct EdgeSample {
   size_t pixel = 0;
   Vec3 position{0.0f}, normal{0.0f};
   uint32_t material = 0;
+  Vec3 albedo{1.0f};  ///< IndirectSplit::albedo
 };
 
 /// Filter pixels an edge sample may take its indirect light from: within this many pixels.
@@ -150,7 +151,8 @@ public:
       switch (m_request->layers[i]) {
         case Aov::Albedo:
           if (hit) {
-            const Material& m = m_scene.materials[sh.material];
+            Material textured;
+            const Material& m = m_scene.materialAt(sh, textured);
             put(m.isDiffuse() ? m.albedo : m.specular);
           }
           break;
@@ -447,8 +449,11 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
   result.completedSpp = settings.spp;
   result.image = Image(w, h);
   IndirectBuffer ib;
+  // Per pixel, the mean IndirectSplit::albedo of its samples: the filtered light's factor.
+  std::vector<Vec3> modulation;
   if (split) {
     const size_t n = size_t(w) * size_t(h);
+    modulation.assign(n, Vec3(1.0f));
     ib.width = w;
     ib.height = h;
     ib.indirect.assign(n, Vec3(0.0f));
@@ -490,7 +495,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
         const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
         Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
         // Sum in double so the mean does not depend on float rounding of a long sum.
-        DVec3 sum(0.0), indirectSum(0.0), positionSum(0.0);
+        DVec3 sum(0.0), indirectSum(0.0), positionSum(0.0), albedoSum(0.0);
         int seen = 0;  // samples whose first hit split off its indirect light
         bool oneSurface = true;
         IndirectSplit first;
@@ -520,7 +525,8 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
           if (sp.deferred) tilePending[size_t(tile)].push_back({pixel, sp.gather});
           else indirectSum += DVec3(sp.indirect);
           positionSum += DVec3(sp.position);
-          pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material});
+          albedoSum += DVec3(sp.albedo);
+          pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material, sp.albedo});
           if (seen++ == 0) first = sp;
           else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kSameSurfaceCos) oneSurface = false;
         }
@@ -534,6 +540,7 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
         result.image.at(x, y) = Vec3(sum / spp);
         if (!split) continue;
         ib.indirect[pixel] = Vec3(indirectSum / spp);
+        if (seen > 0) modulation[pixel] = Vec3(albedoSum / double(seen));
         if (seen > 0 && oneSurface) {
           ib.position[pixel] = Vec3(positionSum / double(seen));
           ib.normal[pixel] = first.normal;
@@ -615,9 +622,9 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     // The borrowing pixels: each sample's share of its filter pixel's light, in sample order.
     std::vector<DVec3> borrowed(indirect.size(), DVec3(0.0));
     for (size_t i = 0; i < edges.size(); ++i)
-      if (borrows[edges[i].pixel]) borrowed[edges[i].pixel] += DVec3(indirect[size_t(from[i])]);
+      if (borrows[edges[i].pixel]) borrowed[edges[i].pixel] += DVec3(indirect[size_t(from[i])] * edges[i].albedo);
     for (size_t p = 0; p < indirect.size(); ++p)
-      if (borrows[p]) indirect[p] = Vec3(borrowed[p] / double(settings.spp));
+      indirect[p] = borrows[p] ? Vec3(borrowed[p] / double(settings.spp)) : indirect[p] * modulation[p];
     for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
     result.layers = aovs.layers(settings.spp, &indirect);
     result.stageSeconds["filter"] = stage.seconds();

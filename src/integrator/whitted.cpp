@@ -18,12 +18,14 @@ nlohmann::json WhittedIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"light_samples", m_lightSamples}};
 }
 
-Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u) {
-  const LightSample ls = scene.sampleLight(hit.position, u);
+Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u,
+                       bool withEnvironment) {
+  const LightSample ls = scene.sampleLight(hit.position, u, withEnvironment, &hit.shadingNormal);
   if (!(ls.pdf > 0.0f)) return Vec3(0.0f);
   const Frame frame(hit.shadingNormal);
   const Vec3 wi = frame.toLocal(ls.wi);
-  const Vec3 f = bsdfEval(scene.materials[hit.material], frame.toLocal(woWorld), wi) * std::fabs(wi.z);
+  Material textured;
+  const Vec3 f = bsdfEval(scene.materialAt(hit, textured), frame.toLocal(woWorld), wi) * std::fabs(wi.z);
   if (isBlack(f)) return Vec3(0.0f);
   if (accel.occluded(spawnRayTo(hit.position, hit.positionError, hit.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal)))
     return Vec3(0.0f);
@@ -31,9 +33,9 @@ Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit&
 }
 
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Sampler& sampler,
-                         int samples) {
+                         int samples, bool withEnvironment) {
   Vec3 sum(0.0f);
-  for (int i = 0; i < samples; ++i) sum += directLightSample(scene, accel, hit, woWorld, sampler.uniform2());
+  for (int i = 0; i < samples; ++i) sum += directLightSample(scene, accel, hit, woWorld, sampler.uniform2(), withEnvironment);
   return sum / static_cast<float>(samples);
 }
 

@@ -50,6 +50,20 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scen
     power.push_back(lum);
   }
 
+  // The environment: pi R^2 times its radiance's integral over the sphere (the flux through a
+  // disc of radius R facing each direction).
+  if (scene.environment) {
+    Light l;
+    l.environment = true;
+    const double r = double(m_sphere.radius);
+    l.fluxWatts = double(kPi) * r * r * glm::max(DVec3(scene.environment->integral()), DVec3(0.0));
+    const double lum = luminanceD(l.fluxWatts);
+    if (lum > 0.0 && std::isfinite(lum)) {
+      m_lights.push_back(l);
+      power.push_back(lum);
+    }
+  }
+
   // Choice in proportion to luminance; the RGB flux rides along (divided by the pmf on emission).
   double total = 0.0;
   for (double p : power) total += p;
@@ -99,6 +113,8 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   // per channel even when the lights differ in colour).
   out.fluxWatts = light.fluxWatts / m_pmf[idx];
 
+  if (light.environment) return sampleEnvironment(idx, uPos, uDir, m_sphere.center, m_sphere.radius, out);
+
   if (light.directional >= 0) {
     // A uniform point on the disc of radius R across the light, outside the scene: every ray
     // of the light that meets the scene starts on it, each carrying E pi R^2 / photons.
@@ -130,11 +146,37 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   return true;
 }
 
+bool LightEmission::sampleEnvironment(size_t idx, const Vec2& uPos, const Vec2& uDir, const Vec3& centre, float radius,
+                                      EmittedPhoton& out) const {
+  // A direction w from the environment's sampler (uDir: the emission guide's cell), then a
+  // uniform point on the disc of radius r facing w, outside the scene's bounding sphere,
+  // centred on the line through `centre` along w: every ray from that direction whose first
+  // hit lies in the sphere of radius r around `centre` starts on it. Weight L(w) pi r^2 /
+  // pdf(w) / pmf (pbrt-v4's ImageInfiniteLight::SampleLe).
+  float pdfDir = 0.0f;
+  const Vec3 w = m_scene.environment->sample(uDir, pdfDir);
+  if (!(pdfDir > 0.0f)) return false;
+  const Vec3 d = -w;  // the photon travels from the sky into the scene
+  const Vec3 discC = discCentre(d);
+  const Vec3 onDisc = centre - d * glm::dot(centre - discC, d);
+  const Vec2 q = sampleConcentricDisk(uPos) * radius;
+  out.ray = Ray();
+  out.ray.origin = onDisc + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
+  out.ray.dir = d;
+  const double r = double(radius);
+  out.fluxWatts = double(kPi) * r * r * DVec3(m_scene.environment->radiance(w)) / double(pdfDir) / m_pmf[idx];
+  return isFinite(out.ray.origin) && isFinite(out.ray.dir);
+}
+
 bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, const Sphere& target,
                                  EmittedPhoton& out) const {
   if (m_cdf.empty()) return false;
   const size_t idx = choose(uLight);
   const Light& light = m_lights[idx];
+  if (light.environment) {
+    if (!(target.radius >= 0.0f)) return sample(uLight, uSide, uPos, uDir, out);
+    return sampleEnvironment(idx, uPos, uDir, target.center, std::min(target.radius, m_sphere.radius), out);
+  }
   if (light.directional >= 0) {
     // The paths whose first hit lies in the target start in the disc of its radius around the
     // target's centre projected onto the emitting disc: uniform there, E pi r^2 each.

@@ -29,8 +29,9 @@ struct EmittedPhoton {
 class LightEmission {
 public:
   /// Collects the emissive triangles (positive area and flux), the point lights with positive
-  /// luminance of intensity and the directional lights with positive luminance of irradiance
-  /// (emitting from a disc that covers the scene's bounding sphere, pbrt's distant light).
+  /// luminance of intensity, the directional lights with positive luminance of irradiance
+  /// (emitting from a disc that covers the scene's bounding sphere, pbrt's distant light) and
+  /// the environment (from such a disc facing each direction it draws).
   explicit LightEmission(const Scene& scene);
 
   /// True when no light emits anything (no photon can be emitted).
@@ -38,7 +39,8 @@ public:
   /// Number of lights that can be chosen.
   size_t lightCount() const { return m_cdf.size(); }
   /// Sum of every light's flux, W per channel (Lambertian emitter: pi * Le * area per
-  /// emitting side; point light: 4 pi I; directional: E pi R^2, R the bounding sphere's).
+  /// emitting side; point light: 4 pi I; directional: E pi R^2, R the bounding sphere's;
+  /// environment: pi R^2 times the integral of its radiance over the sphere).
   const DVec3& totalFlux() const { return m_totalFlux; }
   /// Probability of choosing light `i` (emissive triangles first, then point lights).
   double pmf(size_t i) const { return m_pmf[i]; }
@@ -46,7 +48,8 @@ public:
   /// Sample an emitted photon. uLight in [0,1) chooses the light (double, so that lights of
   /// probability below float resolution keep their share), uSide in [0,1) the side of a
   /// two-sided emitter, uPos in [0,1)^2 the point on a triangle, uDir in [0,1)^2 the direction
-  /// (for a directional light, whose direction is fixed, the point on its disc).
+  /// (for a directional light, whose direction is fixed, the point on its disc; for the
+  /// environment the direction, and uPos the point on its disc).
   /// Returns false when nothing is emitted (no lights).
   bool sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const;
   /// The same light and point, but the direction uniform in the cone from that point towards
@@ -62,6 +65,7 @@ private:
     uint32_t triangle = 0;   ///< emissive triangle, or
     int32_t pointLight = -1; ///< index in Scene::pointLights (>= 0 for a point light)
     int32_t directional = -1;///< index in Scene::directionalLights (>= 0 for a directional light)
+    bool environment = false;///< the scene's environment
     DVec3 fluxWatts{0.0};
     bool twoSided = false;
   };
@@ -70,6 +74,12 @@ private:
   /// A uniform point on emissive triangle `light` (its rounding bound in pError) and the
   /// triangle's front (winding) normal.
   Vec3 pointOn(const Light& light, const Vec2& uPos, Vec3& pError, Vec3& frontNormal) const;
+
+  /// An environment photon (light `idx`): its direction from the environment's sampler with
+  /// uDir, its origin uniform (uPos) on the disc of `radius` facing it, beyond the bounding
+  /// sphere, centred on the line through `centre` along it.
+  bool sampleEnvironment(size_t idx, const Vec2& uPos, const Vec2& uDir, const Vec3& centre, float radius,
+                         EmittedPhoton& out) const;
 
   /// The disc a directional light emits from: centred on the bounding sphere's axis along the
   /// light, a little outside the sphere, radius R.

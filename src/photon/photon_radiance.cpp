@@ -223,7 +223,8 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
 
 Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {
   if (m_photons.empty()) return Vec3(0.0f);
-  const Material& mat = m_scene->materials[hit.material];
+  Material textured;
+  const Material& mat = m_scene->materialAt(hit, textured);
   if (!mat.isDiffuse()) return Vec3(0.0f);
   // Diffuse reflection of the irradiance: albedo / pi (Oren-Nayar taken as Lambertian here).
   Vec3 e;

@@ -76,7 +76,8 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
     const Vec3& pos = sh.position;
     const Vec3 woWorld = -glm::normalize(ray.dir);
     if (!isFinite(pos) || !isFinite(sh.shadingNormal) || !isFinite(woWorld)) return;
-    const Material& mat = scene.materials[sh.material];
+    Material textured;
+    const Material& mat = scene.materialAt(sh, textured);
 
     // Store at diffuse hits only (Lambertian, Oren-Nayar): the voxel field gathers diffuse
     // radiance, and glossy lobes are not view-independent, so a glossy hit stores nothing.

@@ -205,7 +205,9 @@ public:
         if (haveIntegrator) fail(n, "a second integrator");
         haveIntegrator = true;
         parseIntegrator(n);
-      } else if (tag == "texture" || tag == "medium" || tag == "volume" || tag == "phase") {
+      } else if (tag == "texture") {
+        // Read where a BSDF refers to it (by id).
+      } else if (tag == "medium" || tag == "volume" || tag == "phase") {
         fail(n, "unsupported element: voxcone has no " + tag + "s");
       } else {
         fail(n, "unsupported element <" + tag + "> in <scene>");
@@ -388,6 +390,27 @@ public:
   // ---------------------------------------------------------------------------------------
   // BSDFs
 
+  /// The index in m_scene.textures of a <texture type="bitmap">: its filename (relative to its
+  /// file's folder), 8-bit files decoded from sRGB, bilinear, repeating, no to_uv.
+  int32_t bitmapTexture(const Node& n) {
+    allowAttrs(n, {"type", "id", "name"});
+    Props p(*this, n);
+    if (p.type() != "bitmap") fail(n, "unsupported texture plugin '" + p.type() + "' (voxcone maps bitmap)");
+    fs::path file = p.getString("filename", "", true);
+    if (file.is_relative()) file = fs::path(n.file->dir) / file;
+    if (p.getBool("raw", false)) fail(n, "raw bitmaps are not supported (voxcone decodes 8-bit files from sRGB)");
+    if (p.getString("filter_type", "bilinear") != "bilinear") fail(n, "filter_type: voxcone filters bilinearly");
+    if (p.getString("wrap_mode", "repeat") != "repeat") fail(n, "wrap_mode: voxcone repeats");
+    if (p.getTransform("to_uv") != glm::dmat4(1.0)) fail(n, "to_uv is not supported");
+    p.finish();
+    m_scene.inputFiles.push_back(file.string());
+    try {
+      return detail::textureIndex(m_scene, file.string());
+    } catch (const Error& e) {
+      fail(n, e.what());
+    }
+  }
+
   /// The material a <bsdf> describes (parsed once per element).
   const Material& bsdfMaterial(const Node& n) {
     const auto it = m_bsdfs.find(n.xml.internal_object());
@@ -451,6 +474,13 @@ public:
     } else if (type == "diffuse") {
       m.type = MaterialType::Lambertian;
       m.albedo = p.getColor("reflectance", Vec3(0.5f), 0.0f, 1.0f);
+      for (const Node& t : p.takeObjects("texture")) {
+        if (!hasAttr(t, "name") || attr(t, "name") != "reflectance")
+          fail(t, "a texture of diffuse must be its 'reflectance' (voxcone textures the albedo only)");
+        if (p.has("reflectance") || m.albedoTexture >= 0) fail(t, "parameter 'reflectance' given twice");
+        m.albedoTexture = bitmapTexture(resolve(t, "texture"));
+        m.albedo = Vec3(1.0f);
+      }
     } else if (type == "conductor" || type == "roughconductor") {
       const std::string preset = p.getString("material", "none");
       if (p.has("eta") || p.has("k") || preset == "none") {
@@ -504,28 +534,6 @@ public:
   // ---------------------------------------------------------------------------------------
   // Shapes
 
-  /// Append triangles, with per-vertex normals when `nrm` is not empty.
-  void addShape(const std::string& name, const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
-                const std::vector<UVec3>& tris, uint32_t material) {
-    ShapeInfo info;
-    info.name = name;
-    info.firstTriangle = uint32_t(m_scene.triangles.size());
-    info.triangleCount = uint32_t(tris.size());
-    info.smoothNormals = !nrm.empty();
-    const uint32_t shapeIdx = uint32_t(m_scene.shapes.size());
-    const uint32_t base = uint32_t(m_scene.positions.size());
-    if (info.smoothNormals && m_scene.normals.size() < m_scene.positions.size())
-      m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
-    m_scene.positions.insert(m_scene.positions.end(), pos.begin(), pos.end());
-    if (info.smoothNormals) m_scene.normals.insert(m_scene.normals.end(), nrm.begin(), nrm.end());
-    else if (!m_scene.normals.empty()) m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
-    for (const UVec3& t : tris) {
-      m_scene.triangles.push_back(t + UVec3(base));
-      m_scene.triMaterial.push_back(material);
-      m_scene.triShape.push_back(shapeIdx);
-    }
-    m_scene.shapes.push_back(info);
-  }
 
   /// The material of a shape: its BSDF (Mitsuba's default: a one-sided diffuse of reflectance
   /// 0.5) with the area emitter's radiance; one Material per (BSDF, radiance) pair.
@@ -588,6 +596,7 @@ public:
     if (!(std::abs(glm::determinant(lin)) > 0.0)) fail(n, "to_world is singular");
     const bool flip = p.getBool("flip_normals", false);
     std::vector<Vec3> pos, nrm;
+    std::vector<Vec2> uvs;
     std::vector<UVec3> tris;
     auto place = [&](const DVec3& v) { return toFloat(n, DVec3(xf * glm::dvec4(v, 1.0))); };
     // Analytic shapes (rectangle, disk, sphere): Mitsuba's normal is the transformed local one
@@ -612,7 +621,12 @@ public:
       }
       if (mesh.triangles.empty()) fail(n, "mesh " + file.string() + " has no triangles");
       const bool faceNormals = p.getBool("face_normals", false);
-      p.getBool("flip_tex_coords", true);  // texture coordinates: voxcone has no textures
+      // Mitsuba flips v by default, its bitmaps' v = 0 being the top row; voxcone's is the bottom
+      // row (texture.h), so the file's own coordinates are voxcone's unless told not to flip.
+      const bool flipTex = p.getBool("flip_tex_coords", true);
+      uvs = mesh.uvs;
+      if (!flipTex)
+        for (Vec2& uv : uvs) uv.y = 1.0f - uv.y;
       for (const Vec3& v : mesh.positions) pos.push_back(place(DVec3(v)));
       tris = mesh.triangles;  // Mitsuba keeps the file's winding under any to_world
       if (!faceNormals) {
@@ -627,6 +641,9 @@ public:
       // Mitsuba 3 rectangle: [-1, 1]^2 in the z = 0 plane, normal +z.
       for (const DVec3& v : {DVec3(-1, -1, 0), DVec3(1, -1, 0), DVec3(1, 1, 0), DVec3(-1, 1, 0)}) pos.push_back(place(v));
       tris = {{0, 1, 2}, {0, 2, 3}};
+      // Mitsuba's uv = ((x + 1) / 2, (y + 1) / 2) with v = 0 its bitmaps' top row: voxcone's v
+      // (the bottom row at 0) is one minus it.
+      uvs = {Vec2(0.0f, 1.0f), Vec2(1.0f, 1.0f), Vec2(1.0f, 0.0f), Vec2(0.0f, 0.0f)};
       orientAnalytic(DVec3(0, 0, 1));
     } else if (type == "disk") {
       // Mitsuba 3 disk: the unit disk in the z = 0 plane, normal +z; a fan of kMitsubaDiskSegments.
@@ -697,7 +714,7 @@ public:
     }
     p.finish();
     const uint32_t mat = shapeMaterial(bsdf.xml ? &bsdf : nullptr, radiance);
-    addShape(name, pos, nrm, tris, mat);
+    detail::appendShape(m_scene, name, pos, nrm, uvs, tris, {mat}, !nrm.empty());
   }
 
   // ---------------------------------------------------------------------------------------
@@ -720,8 +737,38 @@ public:
       m_scene.directionalLights.push_back(dl);
       return;
     }
+    if (p.type() == "constant" || p.type() == "envmap") {
+      if (m_scene.environment) fail(n, "a scene has at most one environment emitter (constant or envmap)");
+      if (p.type() == "constant") {
+        const Vec3 radiance = p.getColor("radiance", Vec3(1.0f));
+        p.finish();
+        m_scene.environment = std::make_shared<Environment>(Environment::constant(radiance));
+        return;
+      }
+      // Mitsuba 3's envmap: its map's u = atan2(d.x, -d.z) / (2 pi) in its own frame, a quarter
+      // turn about +y from voxcone's (environment.h): voxcone's frame direction (m.z, m.y,
+      // -m.x) of Mitsuba's m has the same (u, v). to_world turns Mitsuba's frame into the world.
+      fs::path file = p.getString("filename", "", true);
+      if (file.is_relative()) file = fs::path(n.file->dir) / file;
+      const float scale = p.getFloat("scale", 1.0f, 0.0f);
+      const glm::dmat4 xf = p.getTransform("to_world");
+      p.finish();
+      const glm::mat3 mitsubaToWorld = glm::mat3(glm::dmat3(xf));
+      // voxcone's frame in Mitsuba's (the inverse of the map above): +x -> +z, +z -> -x.
+      const glm::mat3 voxconeToMitsuba(Vec3(0.0f, 0.0f, 1.0f), Vec3(0.0f, 1.0f, 0.0f), Vec3(-1.0f, 0.0f, 0.0f));
+      const glm::mat3 toWorld = mitsubaToWorld * voxconeToMitsuba;
+      if (!isRotation(toWorld)) fail(n, "an envmap's to_world must be a rotation");
+      m_scene.inputFiles.push_back(file.string());
+      try {
+        m_scene.environment = std::make_shared<Environment>(loadEnvironmentMap(file.string(), scale, toWorld));
+      } catch (const Error& e) {
+        fail(n, e.what());
+      }
+      return;
+    }
     if (p.type() != "point")
-      fail(n, "unsupported emitter plugin '" + p.type() + "' (voxcone maps point, directional, and area inside a shape)");
+      fail(n, "unsupported emitter plugin '" + p.type() +
+                  "' (voxcone maps point, directional, constant, envmap, and area inside a shape)");
     PointLight pl;
     const glm::dmat4 xf = p.getTransform("to_world");
     if (p.has("position") && p.has("to_world")) fail(n, "give position or to_world, not both");
@@ -913,7 +960,6 @@ Props::Props(MitsubaLoader& loader, const Node& plugin) : m_loader(loader), m_no
       const std::string name = loader.attr(n, "name");
       if (!m_named.emplace(name, n).second) loader.fail(n, "parameter '" + name + "' given twice");
     } else if (objects.count(tag)) {
-      if (tag == "texture") loader.fail(n, "unsupported: textures (voxcone's parameters are constants)");
       if (tag == "medium" || tag == "volume" || tag == "phase") loader.fail(n, "unsupported: voxcone has no participating media");
       m_objects.push_back(n);
     } else {

@@ -7,6 +7,7 @@
 #include <tiny_obj_loader.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <filesystem>
 #include <string>
@@ -87,6 +88,7 @@ TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std
   const std::vector<tinyobj::shape_t>& shapes = reader.GetShapes();
   const size_t numPositions = attrib.vertices.size() / 3;
   const size_t numNormals = attrib.normals.size() / 3;
+  const size_t numTexcoords = attrib.texcoords.size() / 2;
 
   TriangleMesh mesh;
   for (const tinyobj::material_t& m : reader.GetMaterials()) {
@@ -98,11 +100,13 @@ TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std
     mm.ns = float(m.shininess);
     mm.ni = float(m.ior);
     mm.illum = m.illum;
+    mm.mapKd = m.diffuse_texname;
     mesh.materials.push_back(std::move(mm));
   }
 
-  // Validate every corner, and find out whether all corners carry a normal.
-  bool allNormals = true;
+  // Validate every corner, and find out whether all corners carry a normal (a texture
+  // coordinate).
+  bool allNormals = true, allTexcoords = true;
   size_t corners = 0;
   for (size_t s = 0; s < shapes.size(); ++s) {
     const tinyobj::mesh_t& m = shapes[s].mesh;
@@ -119,31 +123,50 @@ TriangleMesh meshFromReader(const tinyobj::ObjReader& reader, bool ok, const std
         if (idx.normal_index >= 0 && size_t(idx.normal_index) >= numNormals)
           throw MeshError(path, "shape '" + shapes[s].name + "', face " + std::to_string(f) +
                                     ": normal index out of range");
+        if (idx.texcoord_index >= 0 && size_t(idx.texcoord_index) >= numTexcoords)
+          throw MeshError(path, "shape '" + shapes[s].name + "', face " + std::to_string(f) +
+                                    ": texture coordinate index out of range");
         if (idx.normal_index < 0) allNormals = false;
+        if (idx.texcoord_index < 0) allTexcoords = false;
       }
       offset += n;
       corners += n;
     }
   }
   allNormals = allNormals && corners > 0;
+  allTexcoords = allTexcoords && corners > 0;
 
-  // Corner -> mesh vertex. Without normals the file's positions are used as they are; with
-  // normals each distinct (position, normal) pair becomes one vertex, since TriangleMesh shares
-  // one index between positions and normals.
-  std::unordered_map<uint64_t, uint32_t> pairToVertex;
-  if (allNormals) {
-    pairToVertex.reserve(corners);
+  // Corner -> mesh vertex. Without normals and texture coordinates the file's positions are
+  // used as they are; with them each distinct (position, normal, texture coordinate) triple
+  // becomes one vertex, since TriangleMesh shares one index between them.
+  struct CornerHash {
+    size_t operator()(const std::array<int, 3>& k) const {
+      uint64_t h = uint64_t(uint32_t(k[0])) * 0x9E3779B97F4A7C15ull;
+      h ^= (uint64_t(uint32_t(k[1])) + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full;
+      h ^= (uint64_t(uint32_t(k[2])) + 0x85EBCA77C2B2AE63ull) * 0x165667B19E3779F9ull;
+      return size_t(h ^ (h >> 29));
+    }
+  };
+  std::unordered_map<std::array<int, 3>, uint32_t, CornerHash> cornerToVertex;
+  const bool split = allNormals || allTexcoords;
+  if (split) {
+    cornerToVertex.reserve(corners);
   } else {
     mesh.positions.reserve(numPositions);
     for (size_t i = 0; i < numPositions; ++i) mesh.positions.push_back(toVec3(&attrib.vertices[3 * i]));
   }
   auto vertexOf = [&](const tinyobj::index_t& idx) -> uint32_t {
-    if (!allNormals) return uint32_t(idx.vertex_index);
-    const uint64_t key = (uint64_t(uint32_t(idx.vertex_index)) << 32) | uint32_t(idx.normal_index);
-    const auto [it, inserted] = pairToVertex.try_emplace(key, uint32_t(mesh.positions.size()));
+    if (!split) return uint32_t(idx.vertex_index);
+    const std::array<int, 3> key{idx.vertex_index, allNormals ? idx.normal_index : -1,
+                                 allTexcoords ? idx.texcoord_index : -1};
+    const auto [it, inserted] = cornerToVertex.try_emplace(key, uint32_t(mesh.positions.size()));
     if (inserted) {
       mesh.positions.push_back(toVec3(&attrib.vertices[3 * size_t(idx.vertex_index)]));
-      mesh.normals.push_back(toVec3(&attrib.normals[3 * size_t(idx.normal_index)]));
+      if (allNormals) mesh.normals.push_back(toVec3(&attrib.normals[3 * size_t(idx.normal_index)]));
+      if (allTexcoords) {
+        const size_t t = 2 * size_t(idx.texcoord_index);
+        mesh.uvs.emplace_back(float(attrib.texcoords[t]), float(attrib.texcoords[t + 1]));
+      }
     }
     return it->second;
   };

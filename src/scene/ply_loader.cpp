@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <utility>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -98,9 +99,9 @@ std::string plural(const std::string& element) {
   return element + "s";
 }
 
-/// Role a property plays for the loader: one of the six vertex slots, the face index list, or
-/// nothing (skipped).
-enum Role : int { kX = 0, kY, kZ, kNx, kNy, kNz, kFaceIndices, kSkip };
+/// Role a property plays for the loader: one of the eight vertex slots (position, normal,
+/// texture coordinates), the face index list, or nothing (skipped).
+enum Role : int { kX = 0, kY, kZ, kNx, kNy, kNz, kU, kV, kFaceIndices, kSkip };
 
 /// Reads one PLY file. Holds the bytes and the parse state; throws MeshError on any problem.
 class PlyReader {
@@ -289,6 +290,17 @@ private:
           if (idx[k] < 0) fail(where + "vertex element has no '" + kNames[k] + "' property");
         m_hasNormals = idx[3] >= 0 && idx[4] >= 0 && idx[5] >= 0;
         for (int k = 0; k < (m_hasNormals ? 6 : 3); ++k) roles[idx[k]] = Role(k);
+        // Texture coordinates: u v (Blender, Mitsuba), s t, or texture_u texture_v.
+        for (const auto& [un, vn] : {std::pair{"u", "v"}, {"s", "t"}, {"texture_u", "texture_v"}}) {
+          const int iu = e.find(un), iv = e.find(vn);
+          if (iu < 0 || iv < 0) continue;
+          if (e.properties[iu].isList || e.properties[iv].isList)
+            fail(where + "vertex property '" + un + "' or '" + vn + "' is a list");
+          roles[iu] = kU;
+          roles[iv] = kV;
+          m_hasUvs = true;
+          break;
+        }
         if (e.count > std::numeric_limits<uint32_t>::max())
           fail(where + "too many vertices (" + std::to_string(e.count) + ")");
         m_vertexCount = e.count;
@@ -423,16 +435,17 @@ private:
     if (isVertex) {
       m_mesh.positions.reserve(reserve);
       if (m_hasNormals) m_mesh.normals.reserve(reserve);
+      if (m_hasUvs) m_mesh.uvs.reserve(reserve);
     } else if (isFace) {
       m_mesh.triangles.reserve(reserve);
     }
 
-    float slot[6] = {0, 0, 0, 0, 0, 0};
+    float slot[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     for (uint64_t row = 0; row < e.count; ++row) {
       for (size_t k = 0; k < e.properties.size(); ++k) {
         const PlyProperty& p = e.properties[k];
         const Role role = roles[k];
-        if (role <= kNz) {
+        if (role <= kV) {
           slot[role] = asciiFloat(e, row);
         } else if (role == kFaceIndices) {
           const int64_t n = asciiInt(e, row);
@@ -468,6 +481,13 @@ private:
            std::to_string(row) + ": non-finite coordinate");
     m_mesh.positions.push_back(pos);
     if (m_hasNormals) m_mesh.normals.emplace_back(slot[3], slot[4], slot[5]);
+    if (m_hasUvs) {
+      const Vec2 uv(slot[kU], slot[kV]);
+      if (!std::isfinite(uv.x) || !std::isfinite(uv.y))
+        fail((m_format == PlyFormat::Ascii ? lineWhere() : std::string()) + "vertex " + std::to_string(row) +
+             ": non-finite texture coordinate");
+      m_mesh.uvs.push_back(uv);
+    }
   }
 
   //--------------------------------------------------------------------------------------------
@@ -536,6 +556,7 @@ private:
     if (isVertex) {
       m_mesh.positions.reserve(size_t(e.count));
       if (m_hasNormals) m_mesh.normals.reserve(size_t(e.count));
+      if (m_hasUvs) m_mesh.uvs.reserve(size_t(e.count));
     } else if (isFace) {
       // Reserve one triangle per face, as many as the bytes left can hold.
       size_t triangleRow = minRow;
@@ -546,7 +567,7 @@ private:
 
     const char* p = m_cur;
     const char* end = m_end;
-    float slot[6] = {0, 0, 0, 0, 0, 0};
+    float slot[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     for (uint64_t row = 0; row < e.count; ++row) {
       for (size_t k = 0; k < e.properties.size(); ++k) {
         const PlyProperty& prop = e.properties[k];
@@ -554,7 +575,7 @@ private:
         if (!prop.isList) {
           const size_t sz = typeSize(prop.valueType);
           if (size_t(end - p) < sz) truncated(e, row);
-          if (role <= kNz) slot[role] = float(loadFloat(p, prop.valueType));
+          if (role <= kV) slot[role] = float(loadFloat(p, prop.valueType));
           p += sz;
           continue;
         }
@@ -596,6 +617,7 @@ private:
   std::vector<PlyElement> m_elements;
   std::vector<std::vector<Role>> m_roles;  ///< per element, per property
   bool m_hasNormals = false;
+  bool m_hasUvs = false;
   uint64_t m_vertexCount = 0;
 
   const char* m_cur = nullptr;  ///< body cursor

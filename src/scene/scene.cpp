@@ -52,6 +52,9 @@ void Scene::finalize() {
   const float radius = boundingSphere().radius;
   for (const DirectionalLight& dl : directionalLights)
     power.push_back(kPi * radius * radius * std::max(0.0f, luminance(dl.irradiance)));
+  // The environment: the flux through a disc of radius R facing each direction, pi R^2 times
+  // the radiance's integral over the sphere (pbrt-v4's ImageInfiniteLight::Phi).
+  if (environment) power.push_back(kPi * radius * radius * std::max(0.0f, luminance(environment->integral())));
 
   double total = 0.0;
   for (float p : power) total += p;
@@ -93,6 +96,7 @@ SurfaceHit Scene::surfaceAt(uint32_t triangle, float b1, float b2) const {
       if (glm::dot(h.shadingNormal, h.geomNormal) < 0.0f) h.shadingNormal = -h.shadingNormal;
     }
   }
+  if (!uvs.empty()) h.uv = (1.0f - b1 - b2) * uvs[tri.x] + b1 * uvs[tri.y] + b2 * uvs[tri.z];
   return h;
 }
 
@@ -104,18 +108,24 @@ Vec3 Scene::emitted(const SurfaceHit& hit, const Vec3& w) const {
   return Vec3(0.0f);
 }
 
-LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice) const {
+LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout) const {
   LightSample ls;
   if (m_lightCdf.empty()) return ls;
   // Choose a light by power (binary search in the CDF), then reuse u.x within its interval.
-  const float uc = uChoice.x;
-  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_lightCdf.begin(), m_lightCdf.end(), uc) -
+  // Without the environment (the last light) u.x is squeezed below its interval and the
+  // choice's probability renormalized.
+  const bool dropEnvironment = environment && !withEnvironment;
+  const size_t count = m_lightCdf.size() - (dropEnvironment ? 1 : 0);
+  const float share = dropEnvironment ? (count == 0 ? 0.0f : m_lightCdf[count - 1]) : 1.0f;
+  if (!(share > 0.0f)) return ls;
+  const float uc = std::min(uChoice.x * share, share * kOneMinusEpsilon);
+  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_lightCdf.begin(), m_lightCdf.begin() + long(count), uc) -
                                                   m_lightCdf.begin()),
-                              m_lightCdf.size() - 1);
-  const float pmf = m_lightPmf[idx];
+                              count - 1);
+  const float pmf = m_lightPmf[idx] / share;
   if (!(pmf > 0.0f)) return ls;
   const float cdfBelow = idx == 0 ? 0.0f : m_lightCdf[idx - 1];
-  const Vec2 u(std::clamp((uc - cdfBelow) / pmf, 0.0f, kOneMinusEpsilon), uChoice.y);
+  const Vec2 u(std::clamp((uc - cdfBelow) / m_lightPmf[idx], 0.0f, kOneMinusEpsilon), uChoice.y);
   if (idx < m_emissiveTris.size()) {
     // Uniform point on the emissive triangle, converted to a solid-angle density at ref.
     const uint32_t t = m_emissiveTris[idx];
@@ -143,6 +153,35 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice) const {
     return ls;
   }
   const size_t delta = idx - m_emissiveTris.size();
+  if (environment && idx + 1 == m_lightCdf.size()) {
+    // The environment: a direction from its own sampler, its lightPos beyond the bounding
+    // sphere as a directional light's.
+    float pdfDir = 0.0f;
+    Vec3 wi;
+    if (cosineAbout && environment->isConstant()) {
+      // Three quarters cosine-weighted, a quarter uniform (the constant's own sampler) so that
+      // directions below the surface (transmission) keep a density.
+      constexpr float kCosineShare = 0.75f;
+      if (u.x < kCosineShare) {
+        const Vec2 uc(std::min(u.x / kCosineShare, kOneMinusEpsilon), u.y);
+        wi = glm::normalize(Frame(*cosineAbout).toWorld(sampleCosineHemisphere(uc)));
+      } else {
+        const Vec2 ue(std::min((u.x - kCosineShare) / (1.0f - kCosineShare), kOneMinusEpsilon), u.y);
+        wi = environment->sample(ue, pdfDir);
+      }
+      pdfDir = (1.0f - kCosineShare) * environment->pdf(wi) + kCosineShare * cosineHemispherePdf(glm::dot(wi, *cosineAbout));
+    } else {
+      wi = environment->sample(u, pdfDir);
+    }
+    if (!(pdfDir > 0.0f)) return ls;
+    const Sphere s = boundingSphere();
+    ls.distance = 2.0f * (glm::length(ref - s.center) + s.radius) + 1.0f;
+    ls.wi = wi;
+    ls.radiance = environment->radiance(wi);
+    ls.lightPos = ref + wi * ls.distance;
+    ls.pdf = pmf * pdfDir;
+    return ls;
+  }
   if (delta >= pointLights.size()) {
     // Directional: from -direction, its lightPos beyond the scene's bounding sphere (twice the
     // farthest the sphere reaches from ref), so that the shadow ray crosses the whole scene.
@@ -189,6 +228,7 @@ nlohmann::json Scene::statsJson() const {
   j["emissive_triangles"] = m_emissiveTris.size();
   j["point_lights"] = pointLights.size();
   j["directional_lights"] = directionalLights.size();
+  j["environment"] = environment ? (environment->isConstant() ? "constant" : "map") : "none";
   j["bounds_min"] = {m_bounds.lo.x, m_bounds.lo.y, m_bounds.lo.z};
   j["bounds_max"] = {m_bounds.hi.x, m_bounds.hi.y, m_bounds.hi.z};
   return j;

@@ -26,6 +26,16 @@ void checkScenePrecision(const Scene& scene, const std::string& file);
 /// an error.
 void finishScene(Scene& scene, const std::string& file);
 
+/// Append a shape: its vertices (per-vertex normals when `smooth` and `nrm` is not empty;
+/// texture coordinates when `uvs` is not empty, one per vertex) and triangles (indices into
+/// `pos`), with `triMat` one material for all or one per triangle.
+void appendShape(Scene& scene, const std::string& name, const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
+                 const std::vector<Vec2>& uvs, const std::vector<UVec3>& tris, const std::vector<uint32_t>& triMat,
+                 bool smooth);
+
+/// The index in scene.textures of the image file `path` (read once per path). Throws Error.
+int32_t textureIndex(Scene& scene, const std::string& path);
+
 /// A geodesic sphere: an icosahedron subdivided `level` times (20 * 4^level triangles),
 /// projected to the sphere of `radius` (scene units) about `center`; `inward` reverses the
 /// winding. Appends to pos and tris (indices offset by pos' size).

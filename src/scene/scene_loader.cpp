@@ -2,6 +2,7 @@
 // name the JSON path (pbrt-v4's ParameterDictionary::ReportUnused, applied to JSON).
 
 #include "voxcone/core/error.h"
+#include "voxcone/scene/gltf.h"
 #include "voxcone/scene/mesh.h"
 #include "voxcone/scene/mitsuba.h"
 #include "voxcone/scene/scene.h"
@@ -13,6 +14,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -137,16 +139,21 @@ private:
   std::set<std::string> m_used;
 };
 
-Material parseMaterial(Reader& r, const std::string& name) {
+/// `albedoTexture` receives `albedo_texture` (a file name as written) of a diffuse material, whose
+/// `albedo` then defaults to 1 (a factor on the texture).
+Material parseMaterial(Reader& r, const std::string& name, std::string& albedoTexture) {
   Material m;
   m.name = name;
   const std::string type = r.string("type", "", true);
+  if (type == "lambertian" || type == "diffuse" || type == "oren_nayar") {
+    m.type = type == "oren_nayar" ? MaterialType::OrenNayar : MaterialType::Lambertian;
+    albedoTexture = r.string("albedo_texture", "");
+    if (r.has("albedo_texture") && albedoTexture.empty()) r.fail("expected a file name", "albedo_texture");
+    m.albedo = r.rgb("albedo", Vec3(albedoTexture.empty() ? 0.5f : 1.0f), 0.0f, 1.0f);
+  }
   if (type == "lambertian" || type == "diffuse") {
-    m.type = MaterialType::Lambertian;
-    m.albedo = r.rgb("albedo", Vec3(0.5f), 0.0f, 1.0f);
+    // albedo above
   } else if (type == "oren_nayar") {
-    m.type = MaterialType::OrenNayar;
-    m.albedo = r.rgb("albedo", Vec3(0.5f), 0.0f, 1.0f);
     m.sigmaRad = glm::radians(r.number("sigma_deg", 20.0f, 0.0f, 90.0f));
   } else if (type == "mirror") {
     m.type = MaterialType::Mirror;
@@ -329,7 +336,19 @@ private:
     for (auto it = mats.begin(); it != mats.end(); ++it) {
       Reader r(it.value(), "materials." + it.key(), m_file);
       m_materialIndex[it.key()] = static_cast<uint32_t>(m_scene.materials.size());
-      m_scene.materials.push_back(parseMaterial(r, it.key()));
+      std::string texture;
+      Material m = parseMaterial(r, it.key(), texture);
+      if (!texture.empty()) {
+        std::filesystem::path p(texture);
+        if (p.is_relative()) p = std::filesystem::path(m_baseDir) / p;
+        m_scene.inputFiles.push_back(p.string());
+        try {
+          m.albedoTexture = detail::textureIndex(m_scene, p.string());
+        } catch (const Error& e) {
+          throw SceneError(m_file, "materials." + it.key() + ".albedo_texture", e.what());
+        }
+      }
+      m_scene.materials.push_back(std::move(m));
     }
   }
 
@@ -340,36 +359,13 @@ private:
     return it->second;
   }
 
-  void addShape(const std::string& name, const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
-                const std::vector<UVec3>& tris, const std::vector<uint32_t>& triMat, bool smooth) {
-    ShapeInfo info;
-    info.name = name;
-    info.firstTriangle = static_cast<uint32_t>(m_scene.triangles.size());
-    info.triangleCount = static_cast<uint32_t>(tris.size());
-    info.smoothNormals = smooth && !nrm.empty();
-    const uint32_t shapeIdx = static_cast<uint32_t>(m_scene.shapes.size());
-    const uint32_t base = static_cast<uint32_t>(m_scene.positions.size());
-    if (info.smoothNormals && m_scene.normals.size() < m_scene.positions.size())
-      m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
-    m_scene.positions.insert(m_scene.positions.end(), pos.begin(), pos.end());
-    if (info.smoothNormals)
-      m_scene.normals.insert(m_scene.normals.end(), nrm.begin(), nrm.end());
-    else if (!m_scene.normals.empty())
-      m_scene.normals.resize(m_scene.positions.size(), Vec3(0.0f));
-    m_scene.triangles.reserve(m_scene.triangles.size() + tris.size());
-    for (size_t i = 0; i < tris.size(); ++i) {
-      m_scene.triangles.push_back(tris[i] + UVec3(base));
-      m_scene.triMaterial.push_back(triMat.size() == 1 ? triMat[0] : triMat[i]);
-      m_scene.triShape.push_back(shapeIdx);
-    }
-    m_scene.shapes.push_back(info);
-  }
 
   void parseShape(const json& j, const std::string& path) {
     Reader r(j, path, m_file);
     const std::string type = r.string("type", "", true);
     const std::string name = r.string("name", type + std::to_string(m_scene.shapes.size()));
     std::vector<Vec3> pos, nrm;
+    std::vector<Vec2> uvs;
     std::vector<UVec3> tris;
     std::vector<uint32_t> triMat;
     bool smooth = false;
@@ -382,6 +378,9 @@ private:
       // A quad is the triangles (v0,v1,v2) and (v0,v2,v3) (SPEC.md: the split is geometry).
       tris.push_back({0, 1, 2});
       if (n == 4) tris.push_back({0, 2, 3});
+      // Texture coordinates: v0 (0, 0), v1 (1, 0), v2 (1, 1), v3 (0, 1).
+      uvs = {Vec2(0.0f, 0.0f), Vec2(1.0f, 0.0f), Vec2(1.0f, 1.0f)};
+      if (n == 4) uvs.push_back(Vec2(0.0f, 1.0f));
       triMat.push_back(materialRef(r, "material"));
     } else if (type == "sphere") {
       const Vec3 c = r.vec3("center", Vec3(0.0f), true);
@@ -415,6 +414,7 @@ private:
       if (smooth)
         for (const Vec3& n : mesh.normals) nrm.push_back(glm::normalize(nxf * n));
       tris = std::move(mesh.triangles);
+      uvs = std::move(mesh.uvs);
       // Winding flips under a mirroring transform; keep the front side where the file had it.
       if (glm::determinant(glm::mat3(xf)) < 0.0f)
         for (UVec3& t : tris) std::swap(t.y, t.z);
@@ -423,7 +423,13 @@ private:
       } else {
         if (mesh.materials.empty()) r.fail("the mesh defines no materials: give 'material'", "material");
         std::vector<uint32_t> fileMats;
-        for (const MeshMaterial& mm : mesh.materials) fileMats.push_back(addMeshMaterial(mm, file));
+        for (const MeshMaterial& mm : mesh.materials) {
+          try {
+            fileMats.push_back(addMeshMaterial(mm, file, p.parent_path()));
+          } catch (const Error& e) {
+            r.fail(e.what(), "file");
+          }
+        }
         triMat.resize(tris.size());
         for (size_t i = 0; i < tris.size(); ++i) {
           const int32_t fm = i < mesh.faceMaterial.size() ? mesh.faceMaterial[i] : -1;
@@ -432,19 +438,47 @@ private:
           triMat[i] = fileMats[static_cast<size_t>(fm)];
         }
       }
+    } else if (type == "gltf") {
+      // Every mesh of a glTF file with its materials (not its cameras and lights).
+      std::filesystem::path p(r.string("file", "", true));
+      if (p.is_relative()) p = std::filesystem::path(m_baseDir) / p;
+      glm::mat4 xf(1.0f);
+      if (r.has("transform")) {
+        Reader tr(r.get("transform"), r.child("transform"), m_file);
+        xf = parseTransform(tr);
+      }
+      r.finish();
+      m_scene.inputFiles.push_back(p.string());
+      std::vector<std::string> warnings;
+      try {
+        appendGltfMeshes(m_scene, p.string(), xf, warnings);
+      } catch (const Error& e) {
+        r.fail(e.what(), "file");
+      }
+      for (const std::string& w : warnings) std::cerr << "warning: " << w << "\n";
+      return;
     } else {
-      r.fail("unknown shape type '" + type + "' (quad, triangle, sphere, mesh)", "type");
+      r.fail("unknown shape type '" + type + "' (quad, triangle, sphere, mesh, gltf)", "type");
     }
     r.finish();
-    addShape(name, pos, nrm, tris, triMat, smooth);
+    detail::appendShape(m_scene, name, pos, nrm, uvs, tris, triMat, smooth);
   }
 
   /// An MTL material becomes a Lambertian with Kd (and Ke as emission).
-  uint32_t addMeshMaterial(const MeshMaterial& mm, const std::string& file) {
+  /// With `map_Kd` the albedo is the texture alone (Kd ignored, as pbrt and Blender's importer
+  /// take it), the file relative to the OBJ's folder `dir`.
+  uint32_t addMeshMaterial(const MeshMaterial& mm, const std::string& file, const std::filesystem::path& dir) {
     Material m;
     m.name = file + ":" + mm.name;
     m.type = MaterialType::Lambertian;
     m.albedo = glm::clamp(mm.kd, Vec3(0.0f), Vec3(1.0f));
+    if (!mm.mapKd.empty()) {
+      std::filesystem::path t(mm.mapKd);
+      if (t.is_relative()) t = dir / t;
+      m_scene.inputFiles.push_back(t.string());
+      m.albedoTexture = detail::textureIndex(m_scene, t.string());
+      m.albedo = Vec3(1.0f);
+    }
     m.emission = glm::max(mm.ke, Vec3(0.0f));
     m_scene.materials.push_back(m);
     return static_cast<uint32_t>(m_scene.materials.size() - 1);
@@ -465,8 +499,42 @@ private:
       m_scene.directionalLights.push_back(dl);
       return;
     }
+    if (type == "environment") {
+      if (m_scene.environment) r.fail("a scene has at most one environment light");
+      const bool hasFile = r.has("file"), hasRadiance = r.has("radiance");
+      if (hasFile == hasRadiance) r.fail("give either 'file' (an equirectangular map) or 'radiance' (a constant sky)");
+      if (hasRadiance) {
+        const Vec3 radiance = r.rgb("radiance", Vec3(0.0f));
+        r.finish();
+        m_scene.environment = std::make_shared<Environment>(Environment::constant(radiance));
+        return;
+      }
+      std::filesystem::path p(r.string("file", "", true));
+      if (p.is_relative()) p = std::filesystem::path(m_baseDir) / p;
+      const float scale = r.number("scale", 1.0f, 0.0f, kInf);
+      if (r.has("rotate_deg") && r.has("to_world")) r.fail("give 'rotate_deg' or 'to_world', not both");
+      glm::mat3 toWorld = rotationY(r.number("rotate_deg", 0.0f, -360.0f, 360.0f));
+      if (r.has("to_world")) {
+        const json& m = r.get("to_world");
+        if (!m.is_array() || m.size() != 3) r.fail("expected 3 rows of 3 numbers (a rotation)", "to_world");
+        for (int row = 0; row < 3; ++row) {
+          const Vec3 v = r.toVec3(m[size_t(row)], r.child("to_world"));
+          for (int col = 0; col < 3; ++col) toWorld[col][row] = v[col];
+        }
+        if (!isRotation(toWorld)) r.fail("must be a rotation (orthonormal rows, determinant 1)", "to_world");
+      }
+      r.finish();
+      m_scene.inputFiles.push_back(p.string());
+      try {
+        m_scene.environment = std::make_shared<Environment>(loadEnvironmentMap(p.string(), scale, toWorld));
+      } catch (const Error& e) {
+        r.fail(e.what(), "file");
+      }
+      return;
+    }
     if (type != "point")
-      r.fail("unknown light type '" + type + "' (point, directional; area lights are emissive shapes)", "type");
+      r.fail("unknown light type '" + type + "' (point, directional, environment; area lights are emissive shapes)",
+             "type");
     PointLight pl;
     pl.position = r.vec3("position", Vec3(0.0f), true);
     pl.intensity = r.rgb("intensity", Vec3(0.0f));
@@ -504,11 +572,60 @@ void checkScenePrecision(const Scene& scene, const std::string& file) {
   }
 }
 
+void appendShape(Scene& scene, const std::string& name, const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
+                 const std::vector<Vec2>& uvs, const std::vector<UVec3>& tris, const std::vector<uint32_t>& triMat,
+                 bool smooth) {
+  ShapeInfo info;
+  info.name = name;
+  info.firstTriangle = static_cast<uint32_t>(scene.triangles.size());
+  info.triangleCount = static_cast<uint32_t>(tris.size());
+  info.smoothNormals = smooth && !nrm.empty();
+  info.hasUvs = !uvs.empty() && uvs.size() == pos.size();
+  const uint32_t shapeIdx = static_cast<uint32_t>(scene.shapes.size());
+  const uint32_t base = static_cast<uint32_t>(scene.positions.size());
+  // Normals and texture coordinates: every vertex has one once any shape has them (zeros
+  // where a shape has none).
+  if (info.smoothNormals && scene.normals.size() < scene.positions.size())
+    scene.normals.resize(scene.positions.size(), Vec3(0.0f));
+  if (info.hasUvs && scene.uvs.size() < scene.positions.size()) scene.uvs.resize(scene.positions.size(), Vec2(0.0f));
+  scene.positions.insert(scene.positions.end(), pos.begin(), pos.end());
+  if (info.smoothNormals)
+    scene.normals.insert(scene.normals.end(), nrm.begin(), nrm.end());
+  else if (!scene.normals.empty())
+    scene.normals.resize(scene.positions.size(), Vec3(0.0f));
+  if (info.hasUvs)
+    scene.uvs.insert(scene.uvs.end(), uvs.begin(), uvs.end());
+  else if (!scene.uvs.empty())
+    scene.uvs.resize(scene.positions.size(), Vec2(0.0f));
+  scene.triangles.reserve(scene.triangles.size() + tris.size());
+  for (size_t i = 0; i < tris.size(); ++i) {
+    scene.triangles.push_back(tris[i] + UVec3(base));
+    scene.triMaterial.push_back(triMat.size() == 1 ? triMat[0] : triMat[i]);
+    scene.triShape.push_back(shapeIdx);
+  }
+  scene.shapes.push_back(info);
+}
+
+int32_t textureIndex(Scene& scene, const std::string& path) {
+  for (size_t i = 0; i < scene.textures.size(); ++i)
+    if (scene.textures[i]->file == path) return int32_t(i);
+  scene.textures.push_back(std::make_shared<const Texture>(loadTexture(path)));
+  return int32_t(scene.textures.size() - 1);
+}
+
 void finishScene(Scene& scene, const std::string& file) {
   if (scene.triangles.empty()) throw SceneError(file, "shapes", "the scene has no triangles");
+  // A texture needs texture coordinates: a shape without them would take one texel everywhere.
+  for (size_t t = 0; t < scene.triangles.size(); ++t) {
+    const Material& m = scene.materials[scene.triMaterial[t]];
+    const ShapeInfo& shape = scene.shapes[scene.triShape[t]];
+    if (m.albedoTexture >= 0 && !shape.hasUvs)
+      throw SceneError(file, "shapes", "shape '" + shape.name + "' has material '" + m.name +
+                                           "' with a texture but no texture coordinates");
+  }
   scene.finalize();
   checkScenePrecision(scene, file);
-  if (!scene.hasLights()) throw SceneError(file, "", "the scene has no light (no emissive surface, no point or directional light)");
+  if (!scene.hasLights()) throw SceneError(file, "", "the scene has no light (no emissive surface, no point, directional or environment light)");
 }
 
 }  // namespace detail
@@ -544,6 +661,11 @@ Scene loadScene(const std::string& path) { return loadScene(path, {}); }
 
 Scene loadScene(const std::string& path, const std::map<std::string, std::string>& parameters) {
   if (isMitsubaScenePath(path)) return loadMitsubaScene(path, parameters);
+  if (isGltfScenePath(path)) {
+    if (!parameters.empty())
+      throw SceneError(path, "", "-D " + parameters.begin()->first + "=...: parameters apply to Mitsuba XML scenes only");
+    return loadGltfScene(path);
+  }
   if (!parameters.empty())
     throw SceneError(path, "", "-D " + parameters.begin()->first + "=...: parameters apply to Mitsuba XML scenes only");
   std::ifstream in(path, std::ios::binary);

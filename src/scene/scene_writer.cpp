@@ -58,11 +58,12 @@ struct MeshRun {
   std::string relPath;   ///< relative to the scene file
   uint32_t material = 0;
   bool smooth = false;
+  bool uvs = false;      ///< with texture coordinates (u v)
 };
 
-/// Binary little-endian PLY of triangles [first, first + count): float x y z (nx ny nz), uchar
-/// int vertex_indices; vertices renumbered in order of first use.
-void writePly(const Scene& scene, uint32_t first, uint32_t count, bool smooth, const fs::path& path) {
+/// Binary little-endian PLY of triangles [first, first + count): float x y z (nx ny nz) (u v),
+/// uchar int vertex_indices; vertices renumbered in order of first use.
+void writePly(const Scene& scene, uint32_t first, uint32_t count, bool smooth, bool uvs, const fs::path& path) {
   static_assert(sizeof(float) == 4 && sizeof(int32_t) == 4, "PLY float and int are 4 bytes");
   const uint16_t probe = 1;
   unsigned char low;
@@ -85,12 +86,14 @@ void writePly(const Scene& scene, uint32_t first, uint32_t count, bool smooth, c
   head << "ply\nformat binary_little_endian 1.0\ncomment written by voxcone convert\nelement vertex " << order.size()
        << "\nproperty float x\nproperty float y\nproperty float z\n";
   if (smooth) head << "property float nx\nproperty float ny\nproperty float nz\n";
+  if (uvs) head << "property float u\nproperty float v\n";
   head << "element face " << tris.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
   std::string bytes = head.str();
   const auto put = [&](const void* p, size_t n) { bytes.append(static_cast<const char*>(p), n); };
   for (uint32_t v : order) {
     put(&scene.positions[v], 12);
     if (smooth) put(&scene.normals[v], 12);
+    if (uvs) put(&scene.uvs[v], 8);
   }
   for (const UVec3& t : tris) {
     const unsigned char three = 3;
@@ -125,7 +128,8 @@ std::vector<MeshRun> writeMeshes(const Scene& scene, const fs::path& scenePath) 
       r.relPath = folder + "/" + file;
       r.material = scene.triMaterial[t];
       r.smooth = s.smoothNormals && !scene.normals.empty();
-      writePly(scene, t, u - t, r.smooth, dir / file);
+      r.uvs = s.hasUvs && !scene.uvs.empty();
+      writePly(scene, t, u - t, r.smooth, r.uvs, dir / file);
       runs.push_back(r);
       t = u;
     }
@@ -190,7 +194,8 @@ nlohmann::json materialJson(const Material& m) {
 // Mitsuba XML
 
 /// The <bsdf> of material `m` (without emission), indented by `pad`.
-std::string bsdfXml(const Material& m, const std::string& id, const std::string& pad) {
+/// `texture`: the albedo's bitmap file as the scene names it, empty for none.
+std::string bsdfXml(const Material& m, const std::string& id, const std::string& texture, const std::string& pad) {
   std::ostringstream os;
   const bool wrap = m.twoSided && !m.isTransmissive();
   const std::string idAttr = " id=\"" + xmlEscape(id) + "\"";
@@ -210,7 +215,15 @@ std::string bsdfXml(const Material& m, const std::string& id, const std::string&
   switch (m.type) {
     case MaterialType::Lambertian:
       os << in << "<bsdf type=\"diffuse\"" << ownId << ">\n";
-      rgb("reflectance", m.albedo);
+      if (texture.empty()) {
+        rgb("reflectance", m.albedo);
+      } else {
+        if (m.albedo != Vec3(1.0f))
+          throw SceneError(m.name, "", "a textured albedo with a factor other than 1 has no Mitsuba 3 diffuse form");
+        os << in << "  <texture type=\"bitmap\" name=\"reflectance\">\n"
+           << in << "    <string name=\"filename\" value=\"" << xmlEscape(texture) << "\"/>\n"
+           << in << "  </texture>\n";
+      }
       break;
     case MaterialType::OrenNayar:
       throw SceneError(m.name, "", "material type oren_nayar has no Mitsuba 3 BSDF");
@@ -242,6 +255,19 @@ std::string bsdfXml(const Material& m, const std::string& id, const std::string&
   return os.str();
 }
 
+/// An image file (an environment map's, a texture's) as the scene at `scenePath` names it:
+/// relative to its folder.
+std::string fileFromScene(const std::string& file, const fs::path& scenePath) {
+  if (file.empty()) throw Error("an environment map or texture has no file to refer to");
+  std::error_code ec;
+  const fs::path rel = fs::relative(fs::absolute(file), fs::absolute(scenePath).parent_path(), ec);
+  return ec || rel.empty() ? fs::absolute(file).string() : rel.string();
+}
+
+/// voxcone's environment frame in Mitsuba's envmap frame (mitsuba_loader.cpp): Mitsuba's
+/// to_world is voxcone's times the inverse of this.
+glm::mat3 mitsubaFromVoxcone() { return glm::mat3(Vec3(0, 0, 1), Vec3(0, 1, 0), Vec3(-1, 0, 0)); }
+
 }  // namespace
 
 void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
@@ -259,7 +285,12 @@ void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
   // Only the materials some triangle uses (a Mitsuba BSDF no shape names has no triangles).
   std::set<uint32_t> used(scene.triMaterial.begin(), scene.triMaterial.end());
   j["materials"] = nlohmann::json::object();
-  for (uint32_t m : used) j["materials"][names[m]] = materialJson(scene.materials[m]);
+  for (uint32_t m : used) {
+    const Material& mat = scene.materials[m];
+    j["materials"][names[m]] = materialJson(mat);
+    if (mat.albedoTexture >= 0)
+      j["materials"][names[m]]["albedo_texture"] = fileFromScene(scene.textures[size_t(mat.albedoTexture)]->file, path);
+  }
   j["shapes"] = nlohmann::json::array();
   for (const MeshRun& r : writeMeshes(scene, path)) {
     nlohmann::json sh = {{"type", "mesh"}, {"name", r.name}, {"file", r.relPath}, {"material", names[r.material]}};
@@ -272,6 +303,24 @@ void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
   for (const DirectionalLight& dl : scene.directionalLights)
     j["lights"].push_back(
         {{"type", "directional"}, {"direction", cleanVec(dl.direction)}, {"irradiance", cleanVec(dl.irradiance)}});
+  if (const auto& env = scene.environment) {
+    nlohmann::json e = {{"type", "environment"}};
+    if (env->isConstant()) {
+      e["radiance"] = cleanVec(env->constantRadiance());
+    } else {
+      e["file"] = fileFromScene(env->file, path);
+      e["scale"] = clean(env->scale());
+      const glm::mat3& m = env->toWorld();
+      // A turn about +y as rotate_deg (its first column is (cos, 0, -sin)), else the matrix.
+      if (std::fabs(m[1].y - 1.0f) < 1e-6f && std::fabs(m[0].y) < 1e-6f && std::fabs(m[2].y) < 1e-6f) {
+        e["rotate_deg"] = clean(glm::degrees(std::atan2(-m[0].z, m[0].x)));
+      } else {
+        e["to_world"] = nlohmann::json::array();
+        for (int row = 0; row < 3; ++row) e["to_world"].push_back(cleanVec(Vec3(m[0][row], m[1][row], m[2][row])));
+      }
+    }
+    j["lights"].push_back(e);
+  }
   writeText(path, j.dump(2) + "\n");
 }
 
@@ -324,7 +373,12 @@ void writeMitsubaScene(const Scene& scene, const std::string& xmlPath) {
   os << "      <rfilter type=\"box\"/>\n";
   os << "    </film>\n";
   os << "  </sensor>\n";
-  for (uint32_t m : used) os << bsdfXml(scene.materials[m], names[m], "  ");
+  for (uint32_t m : used) {
+    const Material& mat = scene.materials[m];
+    const std::string texture =
+        mat.albedoTexture >= 0 ? fileFromScene(scene.textures[size_t(mat.albedoTexture)]->file, path) : std::string();
+    os << bsdfXml(mat, names[m], texture, "  ");
+  }
   const std::set<std::string> materialIds(names.begin(), names.end());
   std::set<std::string> shapeIds;
   for (const MeshRun& r : writeMeshes(scene, path)) {
@@ -352,6 +406,23 @@ void writeMitsubaScene(const Scene& scene, const std::string& xmlPath) {
     os << "  <emitter type=\"directional\">\n";
     os << "    <vector name=\"direction\" value=\"" << vecText(dl.direction) << "\"/>\n";
     os << "    <rgb name=\"irradiance\" value=\"" << vecText(dl.irradiance) << "\"/>\n";
+    os << "  </emitter>\n";
+  }
+  if (const auto& env = scene.environment) {
+    if (env->isConstant()) {
+      os << "  <emitter type=\"constant\">\n";
+      os << "    <rgb name=\"radiance\" value=\"" << vecText(env->constantRadiance()) << "\"/>\n";
+    } else {
+      os << "  <emitter type=\"envmap\">\n";
+      os << "    <string name=\"filename\" value=\"" << xmlEscape(fileFromScene(env->file, path)) << "\"/>\n";
+      os << "    <float name=\"scale\" value=\"" << floatText(env->scale()) << "\"/>\n";
+      const glm::mat3 m = env->toWorld() * glm::transpose(mitsubaFromVoxcone());
+      os << "    <transform name=\"to_world\">\n      <matrix value=\"";
+      for (int row = 0; row < 4; ++row)
+        for (int col = 0; col < 4; ++col)
+          os << (row || col ? " " : "") << (row < 3 && col < 3 ? floatText(m[col][row]) : row == col ? "1" : "0");
+      os << "\"/>\n    </transform>\n";
+    }
     os << "  </emitter>\n";
   }
   os << "</scene>\n";

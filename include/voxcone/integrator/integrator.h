@@ -36,6 +36,9 @@ struct IndirectSplit {
   Vec3 position{0.0f};   ///< the first hit, world space
   Vec3 normal{0.0f};     ///< its unit geometric normal on the viewer's side
   uint32_t material = 0;
+  /// What the filterable light is multiplied by after the filter: a textured albedo at the hit
+  /// (the light is estimated without it, so that the filter does not blur the texture), else 1.
+  Vec3 albedo{1.0f};
   bool valid = false;    ///< the first hit is a surface whose indirect light is filterable
   /// The sample's filterable indirect light is `gather`'s estimate (gatherDeferred) rather
   /// than `indirect`.

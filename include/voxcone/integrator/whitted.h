@@ -26,10 +26,12 @@ private:
 };
 
 /// Direct light at a non-delta surface by light sampling only (no MIS): one estimate with
-/// `samples` shadow rays. wo is the unit direction towards the viewer (world space).
+/// `samples` shadow rays. wo is the unit direction towards the viewer (world space). Without
+/// `withEnvironment` the environment is left out (Scene::sampleLight).
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Sampler& sampler,
-                         int samples);
+                         int samples, bool withEnvironment = true);
 /// One sample of it: the light sampled at 2D point u, one shadow ray.
-Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, const Vec2& u);
+Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, const Vec2& u,
+                       bool withEnvironment = true);
 
 }  // namespace voxcone

@@ -28,10 +28,13 @@ enum class TransportMode { Radiance, Importance };
 
 /// A named material. Units: reflectances in [0,1] per linear RGB channel; `emission` is
 /// radiance in W/(sr m^2) (scene units cancel: only ratios matter).
-struct Material {
-  std::string name;
+/// A material's parameters, all but its name (so that a textured hit's copy, Scene::materialAt,
+/// copies no string).
+struct MaterialParams {
   MaterialType type = MaterialType::Lambertian;
-  Vec3 albedo{0.5f};          ///< diffuse reflectance (Lambertian, OrenNayar)
+  Vec3 albedo{0.5f};          ///< diffuse reflectance (Lambertian, OrenNayar); with a texture, its factor
+  /// Index into Scene::textures of the diffuse reflectance's texture (times `albedo`), -1 none.
+  int32_t albedoTexture = -1;
   float sigmaRad = 0.0f;      ///< Oren-Nayar: std. deviation of the facet angle, radians
   Vec3 specular{1.0f};        ///< tint of mirror, dielectric and conductor lobes
   float ior = 1.5f;           ///< dielectric: index inside / index outside (outside = +normal side)
@@ -62,6 +65,10 @@ struct Material {
   /// True when the material scatters nothing seen from direction `cosFront` (the cosine of the
   /// direction with the shading normal, oriented as SurfaceHit's): a one-sided reflector from behind.
   bool blackFrom(float cosFront) const { return !twoSided && !isTransmissive() && !(cosFront > 0.0f); }
+};
+
+struct Material : MaterialParams {
+  std::string name;
 };
 
 }  // namespace voxcone

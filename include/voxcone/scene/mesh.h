@@ -20,12 +20,14 @@ struct MeshMaterial {
   float ns = 0.0f; ///< Phong exponent
   float ni = 1.0f; ///< index of refraction
   int illum = 2;   ///< MTL illumination model
+  std::string mapKd; ///< `map_Kd`: the diffuse texture's file as the MTL names it (relative to the OBJ's folder)
 };
 
 /// Indexed triangle mesh in its file's coordinates.
 struct TriangleMesh {
   std::vector<Vec3> positions;
   std::vector<Vec3> normals;           ///< per vertex; empty when the file has none
+  std::vector<Vec2> uvs;               ///< per vertex texture coordinates; empty when the file has none
   std::vector<UVec3> triangles;        ///< vertex indices into positions (and normals)
   std::vector<int32_t> faceMaterial;   ///< per triangle index into `materials`; empty or -1 = none
   std::vector<MeshMaterial> materials; ///< materials the file defines (OBJ+MTL)

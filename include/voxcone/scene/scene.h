@@ -7,12 +7,15 @@
 #include "voxcone/core/ray.h"
 #include "voxcone/core/sampler.h"
 #include "voxcone/scene/camera.h"
+#include "voxcone/scene/environment.h"
 #include "voxcone/scene/material.h"
+#include "voxcone/scene/texture.h"
 
 #include <nlohmann/json_fwd.hpp>
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -58,16 +61,17 @@ struct ShapeInfo {
   uint32_t firstTriangle = 0;
   uint32_t triangleCount = 0;
   bool smoothNormals = false;
+  bool hasUvs = false;  ///< its vertices carry texture coordinates
 };
 
 /// A light sample towards a shading point.
 struct LightSample {
-  Vec3 radiance{0.0f};   ///< Le (area), I/r^2 (point) or E (directional) arriving along -wi, before visibility
+  Vec3 radiance{0.0f};   ///< Le (area, environment), I/r^2 (point) or E (directional) arriving along -wi, before visibility
   Vec3 wi{0.0f};         ///< unit direction from the shading point to the light
   Vec3 lightPos{0.0f};   ///< sampled point on the light
   Vec3 lightPosError{0.0f};///< bound on lightPos's rounding error per axis (zero for point lights)
   Vec3 lightNormal{0.0f};///< geometric normal there (zero for point lights)
-  float distance = 0.0f; ///< to lightPos (a directional light's: beyond the scene's bounds)
+  float distance = 0.0f; ///< to lightPos (a directional or environment light's: beyond the scene's bounds)
   float pdf = 0.0f;      ///< solid-angle pdf (including the light choice); 0 = failed
   bool delta = false;    ///< point or directional light (cannot be hit by BSDF sampling)
 };
@@ -78,6 +82,7 @@ struct SurfaceHit {
   Vec3 positionError{0.0f};///< bound on position's rounding error per axis (barycentricPoint)
   Vec3 geomNormal{0.0f};   ///< unit, from the winding: normalize(cross(v1-v0, v2-v0))
   Vec3 shadingNormal{0.0f};///< unit; the geometric one for flat shading
+  Vec2 uv{0.0f};           ///< texture coordinates (Scene::uvs interpolated), (0, 0) without
   uint32_t triangle = 0;
   uint32_t material = 0;
 };
@@ -88,13 +93,17 @@ public:
   // Geometry, flattened over all shapes.
   std::vector<Vec3> positions;
   std::vector<Vec3> normals;           ///< per vertex, or empty when no shape is smooth
+  std::vector<Vec2> uvs;               ///< per vertex texture coordinates, or empty when no shape has them
   std::vector<UVec3> triangles;
   std::vector<uint32_t> triMaterial;   ///< per triangle index into materials
   std::vector<uint32_t> triShape;      ///< per triangle index into shapes
   std::vector<ShapeInfo> shapes;
   std::vector<Material> materials;
+  std::vector<std::shared_ptr<const Texture>> textures;  ///< what materials' albedoTexture index
   std::vector<PointLight> pointLights;
   std::vector<DirectionalLight> directionalLights;
+  /// The sky: radiance arriving from infinity along rays that leave the scene; null for none.
+  std::shared_ptr<const Environment> environment;
   Camera camera;
   RenderSettings render;
   std::string sourcePath;              ///< file the scene came from (for messages and sidecars)
@@ -115,11 +124,22 @@ public:
   /// times the ray's length (the bias of every shadow ray from surfaces near coordinate 0).
   SurfaceHit surfaceAt(uint32_t triangle, float b1, float b2) const;
 
+  /// The material at a hit: its own, or with a texture its albedo there (the texture times the
+  /// material's factor, clamped to [0, 1]) in `scratch`, which is returned.
+  const Material& materialAt(const SurfaceHit& hit, Material& scratch) const {
+    const Material& m = materials[hit.material];
+    if (m.albedoTexture < 0) return m;
+    static_cast<MaterialParams&>(scratch) = m;
+    scratch.albedo = glm::clamp(m.albedo * textures[size_t(m.albedoTexture)]->lookup(hit.uv), Vec3(0.0f), Vec3(1.0f));
+    return scratch;
+  }
+
   /// Emitted radiance leaving an emissive surface towards direction `w` (unit, pointing away).
   Vec3 emitted(const SurfaceHit& hit, const Vec3& w) const;
 
-  // Lights. Every emissive triangle, point light and directional light is one light; one is
-  // chosen in proportion to its power (luminance of emitted flux).
+  // Lights. Every emissive triangle, point light and directional light, and the environment,
+  // is one light; one is chosen in proportion to its power (luminance of emitted flux; the
+  // environment's pi R^2 times its radiance's integral over the sphere, R the bounding sphere's).
   size_t lightCount() const { return m_lightCdf.size(); }
   bool hasLights() const { return !m_lightCdf.empty(); }
   /// Sample a light towards `ref` with one 2D sample u: u.x chooses the light, then, rescaled to
@@ -127,9 +147,25 @@ public:
   /// point from one stratified 2D sample keep the point set on each light stratified (two
   /// separate samples would pick each triangle's points at random from a net), which matters
   /// for quads, two triangles of equal power.
-  LightSample sampleLight(const Vec3& ref, const Vec2& u) const;
+  /// Without `withEnvironment` the environment is left out (the other lights chosen by power
+  /// among themselves; no sample where it is the only light).
+  /// With `cosineAbout` (a unit normal) a constant environment's direction is a one-sample
+  /// mixture, three quarters cosine-weighted about the normal and a quarter uniform, the pdf
+  /// the mixture's (a constant sky through a window then wastes few samples below the surface;
+  /// a map keeps its own luminance sampler: mixing measured noisier under a bright patch).
+  /// escapedPdf is the pdf without it.
+  LightSample sampleLight(const Vec3& ref, const Vec2& u, bool withEnvironment = true,
+                          const Vec3* cosineAbout = nullptr) const;
   /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
   float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
+  /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
+  /// environment's, zero without one.
+  Vec3 escaped(const Vec3& dir) const { return environment ? environment->radiance(dir) : Vec3(0.0f); }
+  /// Solid-angle pdf of sampleLight choosing the environment in direction `dir` (for MIS of
+  /// rays that leave the scene); zero without one.
+  float escapedPdf(const Vec3& dir) const {
+    return environment && !m_lightPmf.empty() ? m_lightPmf.back() * environment->pdf(dir) : 0.0f;
+  }
   /// Total emitted power (W, luminance), for photon emission in part 2.
   float totalLightPower() const { return m_totalPower; }
   /// Triangle area in scene units squared.
@@ -147,7 +183,7 @@ private:
   std::vector<Vec3> m_emissiveNormal;      ///< per emissive triangle: its unit winding normal
   std::vector<float> m_lightCdf;           ///< cumulative power, normalized; lights are
                                            ///< [emissive triangles..., point lights...,
-                                           ///<  directional lights...]
+                                           ///<  directional lights..., environment]
   std::vector<float> m_lightPmf;
   std::vector<int32_t> m_triLightIndex;    ///< per triangle: light index or -1
   float m_totalPower = 0.0f;

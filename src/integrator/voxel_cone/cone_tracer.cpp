@@ -71,7 +71,8 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,
                                   int depth) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
-  const Material& m = m_scene.materials[sh.material];
+  Material textured;
+  const Material& m = m_scene.materialAt(sh, textured);
   const Frame frame(sh.shadingNormal);
   DeltaLobe lobes[2];
   const int count = bsdfDeltaLobes(m, frame.toLocal(-d), lobes);
@@ -87,7 +88,8 @@ Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tan
 
 Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
-  const Material& m = m_scene.materials[sh.material];
+  Material textured;
+  const Material& m = m_scene.materialAt(sh, textured);
   Vec3 L = directLightSample(m_scene, m_accel, sh, -d, lightU);
   // The cone's lightU is its only random pair (a Hammersley point, shifted per gather): the
   // direction's numbers and the next hit's light sample are a hash of its bits, independent of
@@ -108,7 +110,7 @@ Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2&
 }
 
 Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
-                       const Vec2& lightU, int depth) const {
+                       const Vec2& lightU, int depth, bool sky) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -128,7 +130,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
-    if (!hit) return Vec3(0.0f);
+    if (!hit) return sky ? m_scene.escaped(d) : Vec3(0.0f);
     const Material& hm = m_scene.materials[hit->surface.material];
     if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
     if (m_photons && !hm.isDiffuse()) return continueGlossy(hit->surface, d, lightU, depth);

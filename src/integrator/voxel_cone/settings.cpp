@@ -4,6 +4,8 @@
 
 #include "../options.h"
 #include "voxcone/core/error.h"
+#include "voxcone/scene/environment.h"
+#include "voxcone/scene/scene.h"
 
 #include <algorithm>
 #include <limits>
@@ -137,6 +139,11 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
     throw SettingsError("voxcone.hit_radiance: a field read back (voxcone.field) has no photons; give \"field\" or nothing");
   out.hitDirect = r.choice("hit_direct", {"rays", "photons"}) == "rays";
   out.hitEstimate.indirectOnly = out.hitPhotons && out.hitDirect;
+  // "auto": cones under a constant sky, rays under a map (a map's small bright patch read at a
+  // few cone axes per pixel put cells off by up to 47%; sky-room, a constant sky through a
+  // window, gave 29.2 dB by cones, 26.9 by rays at the same worst cell).
+  const std::string sky = r.choice("sky_light", {"auto", "cones", "rays"});
+  out.skyByCones = out.hitGather && (sky == "cones" || (sky == "auto" && scene.environment && scene.environment->isConstant()));
   out.glintSamples = r.integer("glint_samples", anyDelta ? kDefaultGlintSamples : 0, 0, 4096);
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
@@ -174,6 +181,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"gather", hitGather ? "hit" : "march"},
           {"hit_radiance", hitPhotons ? "photons" : "field"},
           {"hit_direct", hitDirect ? "rays" : "photons"},
+          {"sky_light", skyByCones ? "cones" : "rays"},
           {"hit_photons", hitEstimate.k},
           {"hit_radius", hitEstimate.maxRadius},
           {"hit_cache", hitEstimate.cacheStride},

@@ -193,10 +193,13 @@ void VoxelConeIntegrator::startTracer() {
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
 }
 
-Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain) const {
+Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain,
+                                         bool untextured) const {
   const ConeSet& cones = chain ? m_chainCones : m_cones;
   const float tanHalf = chain ? m_chainTanHalf : m_tanHalf;
-  const Material& mat = m_scene.materials[sh.material];
+  Material textured;
+  const Material& mat = m_scene.materialAt(sh, textured);
+  if (untextured && mat.albedoTexture >= 0) textured.albedo = Vec3(1.0f);
   const Vec3 ng = glm::dot(sh.geomNormal, woWorld) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
   const Frame frame(sh.shadingNormal);
   const Vec3 wo = frame.toLocal(woWorld);
@@ -221,16 +224,22 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
     if (isBlack(f)) continue;
     Vec2 lightU((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
     lightU -= glm::floor(lightU);
-    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf, lightU);
+    indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf, lightU, 0,
+                                                  m_settings.skyByCones);
   }
   return indirect;
 }
 
-Vec3 VoxelConeIntegrator::gatherDeferred(const DeferredGather& g) const { return gatherDiffuse(g.hit, g.wo, g.u); }
+Vec3 VoxelConeIntegrator::gatherDeferred(const DeferredGather& g) const {
+  // A textured albedo taken as 1: the light is filtered across the texture's detail and
+  // multiplied by the albedo after (IndirectSplit::albedo).
+  return gatherDiffuse(g.hit, g.wo, g.u, false, true);
+}
 
 Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampler& sampler, IndirectSplit* split,
                                  RadianceTerms* terms, const Vec3& weight, int depth) const {
-  const Material& mat = m_scene.materials[sh.material];
+  Material textured;
+  const Material& mat = m_scene.materialAt(sh, textured);
   // A viewpoint on the viewer's side, clear of the surface's own voxels of size `voxel` (as the
   // cones' apex in ConeTracer::trace).
   const auto viewFrom = [&](const Vec3& dir, float voxel) { return sh.position + dir * (kApexLift * voxel); };
@@ -252,7 +261,8 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
     return result();
   }
   if (m_settings.view == View::Full || m_settings.view == View::Direct)
-    direct = estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples);
+    direct = estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples,
+                                 !(m_settings.skyByCones && mat.isDiffuse()));
   if (m_settings.view == View::Direct) return result();
   // Cones on the pixel's first `gathers` samples only, weighted to keep the pixel's mean.
   float gatherWeight = 1.0f;
@@ -274,6 +284,9 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
       split->position = sh.position;
       split->normal = ng;
       split->material = sh.material;
+      // The deferred gather takes a textured albedo as 1: the albedo here multiplies the
+      // filtered light.
+      if (mat.albedoTexture >= 0) split->albedo = mat.albedo;
     }
     if (gatherWeight == 0.0f) return result();
     const float u = sampler.uniform();

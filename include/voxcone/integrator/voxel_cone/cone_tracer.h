@@ -58,8 +58,10 @@ public:
   /// cone's light there is what cones along its reflected and refracted directions gather
   /// from the hit, weighted by the lobes (`depth`: specular and glossy hits so far, up to
   /// kMaxSpecularDepth); at a glossy surface, continueGlossy's. `lightU`: the 2D sample of the light at the hit (hitDirect).
+  /// With `sky`, a cone whose exact axis ray leaves the scene takes the environment's radiance
+  /// along it (the caller leaves the environment out of its shadow rays); else nothing.
   Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, const Vec2& lightU,
-             int depth = 0) const;
+             int depth = 0, bool sky = false) const;
   float finestVoxel() const { return m_v0; }  ///< world units
   /// Per-axis variance of a cone's cross-section at unit distance along its axis, for
   /// directions uniform over its solid angle (half-angle atan(tanHalf)).

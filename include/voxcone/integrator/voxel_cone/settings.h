@@ -60,6 +60,11 @@ struct VoxelConeSettings {
   /// "rays", the default), the photons then only the light that bounced ("photons": all of it
   /// from the photons).
   bool hitDirect = true;
+  /// The environment's light at diffuse shading points (`sky_light`): "cones" takes it from the
+  /// gather's cones whose exact rays leave the scene (filtered with the indirect light; shadow
+  /// rays leave the environment out), "rays" by shadow rays towards it as any light; "auto"
+  /// (the default) cones under a constant sky, rays under a map.
+  bool skyByCones = false;
   PhotonRadianceSettings hitEstimate;  ///< `hit_photons` (k), `hit_radius` (world units)
   View view = View::Full;
   /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead

@@ -169,7 +169,8 @@ private:
   using View = VoxelConeSettings::View;
   /// The cones' indirect light at a diffuse hit seen from woWorld, the cone set turned by 2 pi u
   /// (the chain's set, `chain_cones`, at a hit behind mirrors and glass).
-  Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain = false) const;
+  /// `untextured`: a textured albedo taken as 1 (IndirectSplit::albedo multiplies it back).
+  Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain = false, bool untextured = false) const;
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
   /// hit goes there instead (with the hit's position, normal and material). With `terms`, its
   /// direct, caustic and indirect parts are added there, times `weight` (the delta chain's);
