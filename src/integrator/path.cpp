@@ -46,9 +46,9 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
     if (!intersectSurface(m_scene, m_accel, ray, sh)) {
       // The ray leaves the scene: the environment's radiance, MIS-weighted as emission is.
       const Vec3 dir = glm::normalize(ray.dir);
-      const Vec3 Le = m_scene.escaped(dir);
+      const Vec3 Le = specularBounce || !m_nee ? m_scene.escaped(dir) : m_scene.escapedMis(dir, prevPdf);
       if (!isBlack(Le)) {
-        const Vec3 c = specularBounce || !m_nee ? beta * Le : beta * Le * powerHeuristic(prevPdf, m_scene.escapedPdf(dir));
+        const Vec3 c = beta * Le;
         L += c;
         if (terms) *term(deltaSinceDiffuse) += c;
       }

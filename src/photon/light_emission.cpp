@@ -105,6 +105,19 @@ Vec3 LightEmission::pointOn(const Light& light, const Vec2& uPos, Vec3& pError, 
   return barycentricPoint(p0, p1, p2, 1.0f - b.x - b.y, b.x, b.y, pError);
 }
 
+namespace {
+/// A photon's direction from sun `dl`: its own, or uniform in a finite sun's cone (uPos: the
+/// emitting disc's point takes uDir). Each photon keeps E pi R^2: the flux through a disc
+/// facing a direction of the cone differs from it by a factor cos, 1 - 2e-6 for the real sun.
+Vec3 sunDirection(const DirectionalLight& dl, const Vec2& u) {
+  if (dl.isDelta()) return dl.direction;
+  const float cosT = 1.0f - u.y * dl.oneMinusCos();
+  const float sinT = std::sqrt(std::max(0.0f, 1.0f - cosT * cosT));
+  const float phi = 2.0f * kPi * u.x;
+  return glm::normalize(Frame(dl.direction).toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT)));
+}
+}  // namespace
+
 bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const Vec2& uDir, EmittedPhoton& out) const {
   if (m_cdf.empty()) return false;
   const size_t idx = choose(uLight);
@@ -118,7 +131,7 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   if (light.directional >= 0) {
     // A uniform point on the disc of radius R across the light, outside the scene: every ray
     // of the light that meets the scene starts on it, each carrying E pi R^2 / photons.
-    const Vec3 d = m_scene.directionalLights[static_cast<size_t>(light.directional)].direction;
+    const Vec3 d = sunDirection(m_scene.directionalLights[static_cast<size_t>(light.directional)], uPos);
     const Vec2 q = sampleConcentricDisk(uDir) * m_sphere.radius;
     out.ray = Ray();
     out.ray.origin = discCentre(d) + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
@@ -180,7 +193,7 @@ bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, c
   if (light.directional >= 0) {
     // The paths whose first hit lies in the target start in the disc of its radius around the
     // target's centre projected onto the emitting disc: uniform there, E pi r^2 each.
-    const Vec3 d = m_scene.directionalLights[static_cast<size_t>(light.directional)].direction;
+    const Vec3 d = sunDirection(m_scene.directionalLights[static_cast<size_t>(light.directional)], uPos);
     if (!(target.radius >= 0.0f)) return sample(uLight, uSide, uPos, uDir, out);
     const Vec3 centre = discCentre(d);
     const Vec3 onDisc = target.center - d * glm::dot(target.center - centre, d);

@@ -188,11 +188,21 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
     const DirectionalLight& dl = directionalLights[delta - pointLights.size()];
     const Sphere s = boundingSphere();
     ls.distance = 2.0f * (glm::length(ref - s.center) + s.radius) + 1.0f;
-    ls.wi = -dl.direction;
-    ls.radiance = dl.irradiance;
+    if (dl.isDelta()) {
+      ls.wi = -dl.direction;
+      ls.radiance = dl.irradiance;
+      ls.pdf = pmf;
+      ls.delta = true;
+    } else {
+      // Uniform in the disc's cone: pdf 1 / (2 pi (1 - cos theta)).
+      const float cosT = 1.0f - u.y * dl.oneMinusCos();
+      const float sinT = std::sqrt(std::max(0.0f, 1.0f - cosT * cosT));
+      const float phi = 2.0f * kPi * u.x;
+      ls.wi = glm::normalize(Frame(-dl.direction).toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT)));
+      ls.radiance = dl.radiance();
+      ls.pdf = pmf / dl.solidAngle();
+    }
     ls.lightPos = ref + ls.wi * ls.distance;
-    ls.pdf = pmf;
-    ls.delta = true;
     return ls;
   }
   const PointLight& pl = pointLights[delta];
@@ -206,6 +216,23 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
   ls.pdf = pmf;
   ls.delta = true;
   return ls;
+}
+
+Vec3 Scene::escaped(const Vec3& dir) const {
+  Vec3 L = escapedSky(dir);
+  for (const DirectionalLight& dl : directionalLights)
+    if (dl.seenAlong(dir)) L += dl.radiance();
+  return L;
+}
+
+Vec3 Scene::escapedMis(const Vec3& dir, float bsdfPdf) const {
+  Vec3 L = environment ? environment->radiance(dir) * powerHeuristic(bsdfPdf, escapedPdf(dir)) : Vec3(0.0f);
+  const size_t first = m_emissiveTris.size() + pointLights.size();
+  for (size_t i = 0; i < directionalLights.size(); ++i) {
+    const DirectionalLight& dl = directionalLights[i];
+    if (dl.seenAlong(dir)) L += dl.radiance() * powerHeuristic(bsdfPdf, m_lightPmf[first + i] / dl.solidAngle());
+  }
+  return L;
 }
 
 float Scene::lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const {

@@ -493,8 +493,8 @@ private:
       if (!(glm::length(d) > 0.0f) || !isFinite(glm::normalize(d))) r.fail("must be a non-zero vector", "direction");
       dl.direction = glm::normalize(d);
       dl.irradiance = r.rgb("irradiance", Vec3(0.0f));
-      if (r.number("angle_deg", 0.0f, 0.0f, 90.0f) != 0.0f)
-        r.fail("a sun of finite size is not supported yet: give 0 (a delta light)", "angle_deg");
+      // The full angle; 0 a delta light.
+      dl.halfAngle = glm::radians(0.5f * r.number("angle_deg", 0.0f, 0.0f, 90.0f));
       r.finish();
       m_scene.directionalLights.push_back(dl);
       return;

@@ -300,9 +300,11 @@ void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
   j["lights"] = nlohmann::json::array();
   for (const PointLight& pl : scene.pointLights)
     j["lights"].push_back({{"type", "point"}, {"position", cleanVec(pl.position)}, {"intensity", cleanVec(pl.intensity)}});
-  for (const DirectionalLight& dl : scene.directionalLights)
-    j["lights"].push_back(
-        {{"type", "directional"}, {"direction", cleanVec(dl.direction)}, {"irradiance", cleanVec(dl.irradiance)}});
+  for (const DirectionalLight& dl : scene.directionalLights) {
+    nlohmann::json l = {{"type", "directional"}, {"direction", cleanVec(dl.direction)}, {"irradiance", cleanVec(dl.irradiance)}};
+    if (!dl.isDelta()) l["angle_deg"] = clean(float(glm::degrees(2.0 * double(dl.halfAngle))));
+    j["lights"].push_back(l);
+  }
   if (const auto& env = scene.environment) {
     nlohmann::json e = {{"type", "environment"}};
     if (env->isConstant()) {
@@ -339,6 +341,8 @@ void writeMitsubaScene(const Scene& scene, const std::string& xmlPath) {
   }
   const RenderSettings& s = scene.render;
   if (s.seed > uint64_t(INT32_MAX)) throw SceneError(from, "render.seed", "Mitsuba's sampler seed is a 32-bit integer");
+  for (const DirectionalLight& dl : scene.directionalLights)
+    if (!dl.isDelta()) throw SceneError(from, "lights", "a sun of finite angle_deg has no Mitsuba 3 form (its directional is a delta light)");
 
   std::ostringstream os;
   os << "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n";

@@ -46,7 +46,7 @@ uint64_t voxel::fieldSceneHash(const Scene& scene) {
   for (const PointLight& l : scene.pointLights)
     floats({l.position.x, l.position.y, l.position.z, l.intensity.x, l.intensity.y, l.intensity.z});
   for (const DirectionalLight& l : scene.directionalLights)
-    floats({l.direction.x, l.direction.y, l.direction.z, l.irradiance.x, l.irradiance.y, l.irradiance.z});
+    floats({l.direction.x, l.direction.y, l.direction.z, l.irradiance.x, l.irradiance.y, l.irradiance.z, l.halfAngle});
   if (const auto& env = scene.environment) {
     const Vec3 c = env->constantRadiance();
     const glm::mat3& m = env->toWorld();

@@ -27,13 +27,27 @@ struct PointLight {
   Vec3 intensity{0.0f};
 };
 
-/// A distant light (the sun as a delta light): parallel rays along `direction`, irradiance
-/// `irradiance` (W/m^2 per channel) on a surface facing them. Its flux, for choosing lights and
-/// emitting photons, is what crosses the scene's bounding sphere: irradiance * pi R^2 (pbrt-v4's
-/// DistantLight::Phi).
+/// A distant light (the sun): rays along `direction`, irradiance `irradiance` (W/m^2 per
+/// channel) on a surface facing them. A delta light when cosHalfAngle is 1; else a disc of
+/// uniform radiance L = E / (pi sin^2 theta) seen within half-angle theta of -direction
+/// (`angle_deg` the full angle: the sun's is 0.53), sampled uniformly in that cone and seen by
+/// rays that leave the scene inside it. Its flux, for choosing lights and emitting photons, is
+/// what crosses the scene's bounding sphere: irradiance * pi R^2 (pbrt-v4's DistantLight::Phi).
 struct DirectionalLight {
   Vec3 direction{0.0f, -1.0f, 0.0f};  ///< unit, the direction the light travels
   Vec3 irradiance{0.0f};
+  float halfAngle = 0.0f;             ///< theta, radians; 0: a delta light
+
+  bool isDelta() const { return !(halfAngle > 0.0f); }
+  float cosHalfAngle() const { return std::cos(halfAngle); }
+  /// 1 - cos theta, without cancellation (2 sin^2 (theta / 2)).
+  float oneMinusCos() const { return 2.0f * sqr(std::sin(0.5f * halfAngle)); }
+  /// The disc's radiance (finite suns): E / (pi sin^2 theta).
+  Vec3 radiance() const { return irradiance / (kPi * sqr(std::sin(halfAngle))); }
+  /// The uniform cone's solid angle, 2 pi (1 - cos theta).
+  float solidAngle() const { return 2.0f * kPi * oneMinusCos(); }
+  /// Whether a ray leaving the scene along `dir` (unit) sees the disc.
+  bool seenAlong(const Vec3& dir) const { return !isDelta() && 1.0f + glm::dot(dir, direction) <= oneMinusCos(); }
 };
 
 /// Settings a scene file may give and the command line may override.
@@ -159,10 +173,15 @@ public:
   /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
   float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
   /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
-  /// environment's, zero without one.
-  Vec3 escaped(const Vec3& dir) const { return environment ? environment->radiance(dir) : Vec3(0.0f); }
-  /// Solid-angle pdf of sampleLight choosing the environment in direction `dir` (for MIS of
-  /// rays that leave the scene); zero without one.
+  /// environment's and that of every finite sun whose disc it meets; zero without them.
+  Vec3 escaped(const Vec3& dir) const;
+  /// The environment's alone (voxcone's cones gather the sky; the suns come by shadow rays).
+  Vec3 escapedSky(const Vec3& dir) const { return environment ? environment->radiance(dir) : Vec3(0.0f); }
+  /// escaped(), each light's share weighted by the power heuristic of `bsdfPdf` against
+  /// sampleLight's solid-angle pdf of choosing that light in direction `dir` (path's MIS of
+  /// rays that leave the scene after a non-specular bounce).
+  Vec3 escapedMis(const Vec3& dir, float bsdfPdf) const;
+  /// Solid-angle pdf of sampleLight choosing the environment in direction `dir`; zero without one.
   float escapedPdf(const Vec3& dir) const {
     return environment && !m_lightPmf.empty() ? m_lightPmf.back() * environment->pdf(dir) : 0.0f;
   }

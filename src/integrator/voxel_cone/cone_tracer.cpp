@@ -130,7 +130,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
-    if (!hit) return sky ? m_scene.escaped(d) : Vec3(0.0f);
+    if (!hit) return sky ? m_scene.escapedSky(d) : Vec3(0.0f);
     const Material& hm = m_scene.materials[hit->surface.material];
     if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
     if (m_photons && !hm.isDiffuse()) return continueGlossy(hit->surface, d, lightU, depth);
