@@ -111,10 +111,7 @@ namespace {
 /// facing a direction of the cone differs from it by a factor cos, 1 - 2e-6 for the real sun.
 Vec3 sunDirection(const DirectionalLight& dl, const Vec2& u) {
   if (dl.isDelta()) return dl.direction;
-  const float cosT = 1.0f - u.y * dl.oneMinusCos();
-  const float sinT = std::sqrt(std::max(0.0f, 1.0f - cosT * cosT));
-  const float phi = 2.0f * kPi * u.x;
-  return glm::normalize(Frame(dl.direction).toWorld(Vec3(sinT * std::cos(phi), sinT * std::sin(phi), cosT)));
+  return glm::normalize(Frame(dl.direction).toWorld(sampleUniformCone(u, dl.oneMinusCos())));
 }
 }  // namespace
 

@@ -10,6 +10,7 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/render_helpers.h"
+#include "../support/test_scenes.h"
 
 #include <gtest/gtest.h>
 
@@ -23,10 +24,8 @@ namespace {
 
 using test::imageMean;
 using test::renderWith;
+constexpr auto vec = test::jsonVec;
 
-std::string vec(const Vec3& v) {
-  return "[" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + "]";
-}
 
 /// A 4 x 4 floor (albedo 0.5) at y = 0 around `at`, seen from 3 above by a camera whose view
 /// it fills; the sun travels 60 degrees from straight down (cos 0.5), irradiance (2, 1, 0.5).

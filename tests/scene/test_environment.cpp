@@ -18,6 +18,7 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/render_helpers.h"
+#include "../support/test_scenes.h"
 #include "../support/temp_dir.h"
 
 #include <gtest/gtest.h>
@@ -32,10 +33,8 @@ namespace {
 
 using test::imageMean;
 using test::renderWith;
+constexpr auto vec = test::jsonVec;
 
-std::string vec(const Vec3& v) {
-  return "[" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + "]";
-}
 
 void expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;

@@ -24,10 +24,6 @@
 #include <string>
 #include <vector>
 
-#ifndef VOXCONE_SOURCE_DIR
-#define VOXCONE_SOURCE_DIR "."
-#endif
-
 namespace voxcone {
 namespace {
 
@@ -172,7 +168,7 @@ GltfBuilder fromScene(const Scene& scene) {
 class Gltf : public test::TempDirTest {};
 
 TEST_F(Gltf, CornellBoxRendersAsTheJsonScene) {
-  const Scene box = loadScene(std::string(VOXCONE_SOURCE_DIR) + "/data/scenes/cornell-box.json");
+  const Scene box = test::cornellBox();
   const GltfBuilder b = fromScene(box);
   b.write(path("box.gltf"));
   b.write(path("box.glb"));
@@ -329,8 +325,9 @@ TEST_F(Gltf, MaterialsMapAndWarnWhatTheyDrop) {
 }
 
 TEST_F(Gltf, Errors) {
-  const auto errorOf = [&](const std::string& name, const std::string& text) {
-    std::ofstream(path(name), std::ios::binary) << text;
+  // The one-line error of loading `name` (written as `text` first when given).
+  const auto errorOf = [&](const std::string& name, const std::string& text = "") {
+    if (!text.empty()) std::ofstream(path(name), std::ios::binary) << text;
     try {
       loadGltfScene(path(name));
     } catch (const Error& e) {
@@ -351,12 +348,7 @@ TEST_F(Gltf, Errors) {
   b.doc["materials"].push_back({{"emissiveFactor", {1, 1, 1}}});
   b.root(b.node({{"mesh", b.mesh(b.positions({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}), b.indices({0, 1, 2}), 0)}}));
   b.write(path("d.gltf"));
-  std::string noCamera;
-  try {
-    loadGltfScene(path("d.gltf"));
-  } catch (const Error& e) {
-    noCamera = e.what();
-  }
+  const std::string noCamera = errorOf("d.gltf");
   EXPECT_NE(noCamera.find("no perspective camera"), std::string::npos) << noCamera;
   // An index past the positions.
   GltfBuilder c;
@@ -365,12 +357,7 @@ TEST_F(Gltf, Errors) {
   c.doc["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.01}}}}};
   c.root(c.node({{"camera", 0}, {"translation", {0, 0, 10}}}));
   c.write(path("e.gltf"));
-  std::string badIndex;
-  try {
-    loadGltfScene(path("e.gltf"));
-  } catch (const Error& e) {
-    badIndex = e.what();
-  }
+  const std::string badIndex = errorOf("e.gltf");
   EXPECT_NE(badIndex.find("out of range"), std::string::npos) << badIndex;
 }
 

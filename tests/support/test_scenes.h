@@ -12,6 +12,11 @@ namespace voxcone::test {
 /// Repository root (for data/ files).
 inline std::string sourceDir() { return VOXCONE_SOURCE_DIR; }
 
+/// A vector as a JSON array, for scene text written in a test.
+inline std::string jsonVec(const Vec3& v) {
+  return "[" + std::to_string(v.x) + ", " + std::to_string(v.y) + ", " + std::to_string(v.z) + "]";
+}
+
 /// A closed sphere (radius 1 at the origin, geodesic level `subdiv`) of one Lambertian
 /// material with albedo `albedo`, emitting `emission` on both sides, seen by a camera at the
 /// centre, plus optional point light at the centre with intensity `pointIntensity`.

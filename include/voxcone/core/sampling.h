@@ -38,6 +38,15 @@ inline Vec3 sampleUniformSphere(const Vec2& u) {
 }
 constexpr float kUniformSpherePdf = 1.0f / (4.0f * kPi);
 
+/// Uniform direction in the cone about +z of half-angle theta, given 1 - cos theta (without
+/// cancellation for small cones); pdf 1 / (2 pi (1 - cos theta)).
+inline Vec3 sampleUniformCone(const Vec2& u, float oneMinusCos) {
+  const float z = 1.0f - u.y * oneMinusCos;
+  const float r = safeSqrt(1.0f - z * z);
+  const float phi = 2.0f * kPi * u.x;
+  return Vec3(r * std::cos(phi), r * std::sin(phi), z);
+}
+
 /// Uniform barycentrics (b1, b2) on a triangle (Heitz 2019, "A Low-Distortion Map Between
 /// Triangle and Square").
 inline Vec2 sampleUniformTriangle(const Vec2& u) {
