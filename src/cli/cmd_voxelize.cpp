@@ -61,7 +61,7 @@ void runVoxelize(const VoxelizeOptions& o) {
   // most level 10 (0.55 mm voxels in the Cornell box): the caustic grid is voxelized over the
   // whole scene before it is pruned to the lit voxels, so finer levels cost seconds.
   bool specular = false;
-  for (const Material& m : scene.materials) specular = specular || m.isDelta();
+  for (const Material& m : scene.materials) specular = specular || m.hasDeltaLobe();
   const int causticLevel =
       o.causticLevel >= 0 ? o.causticLevel : (specular ? std::max(o.level, std::min(o.level + 1, 10)) : 0);
 

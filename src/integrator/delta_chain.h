@@ -12,7 +12,8 @@ namespace voxcone {
 
 /// Radiance along `ray`: emission at every hit and the environment where it leaves the scene
 /// (when `withEmission`), `shade(hit, wo, sampler,
-/// depth, weight)` at the first non-delta surface (depth 0: the ray's own first hit; weight:
+/// depth, weight)` at the first non-delta surface (and the delta lobe of a smooth coat, which
+/// `shade` leaves out, followed from there) (depth 0: the ray's own first hit; weight:
 /// the product of the delta lobes' weights that led there), and at delta surfaces every lobe
 /// followed (reflection and refraction both, for glass) up to `maxDepth` segments. With
 /// `terms`, the emission seen is added to terms->emitted times its weight (and to terms->glint
@@ -41,8 +42,14 @@ Vec3 traceDeltaChains(const Scene& scene, const Accel& accel, const Ray& ray, Sa
   if (!hit) return L;
   Material textured;
   const Material& mat = scene.materialAt(sh, textured);
-  if (!mat.isDelta()) return L + shade(sh, woWorld, sampler, depth, weight);
-  if (metGlass && mat.isTransmissive()) *metGlass = true;
+  if (!mat.isDelta()) {
+    L += shade(sh, woWorld, sampler, depth, weight);
+    // A smooth coat over a diffuse base (Plastic): shade took the base; the coat's reflection
+    // is followed as a delta lobe below.
+    if (!mat.hasDeltaLobe()) return L;
+  } else if (metGlass && mat.isTransmissive()) {
+    *metGlass = true;
+  }
   if (depth + 1 >= maxDepth) return L;
   const Frame frame(sh.shadingNormal);
   DeltaLobe lobes[2];

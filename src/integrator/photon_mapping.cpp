@@ -46,7 +46,7 @@ PhotonMappingIntegrator::PhotonMappingIntegrator(const IntegratorContext& c)
 
   // No delta material: no light path L S+ D exists, so the caustic pass would store nothing.
   bool anyDelta = false;
-  for (const Material& m : m_scene.materials) anyDelta = anyDelta || m.isDelta();
+  for (const Material& m : m_scene.materials) anyDelta = anyDelta || m.hasDeltaLobe();
   if (!anyDelta) m_photonSettings.causticPhotons = 0;
 }
 

@@ -153,7 +153,7 @@ public:
           if (hit) {
             Material textured;
             const Material& m = m_scene.materialAt(sh, textured);
-            put(m.isDiffuse() ? m.albedo : m.specular);
+            put(m.hasDiffuseBase() ? m.albedo : m.specular);
           }
           break;
         case Aov::Normal:

@@ -225,11 +225,12 @@ Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {
   if (m_photons.empty()) return Vec3(0.0f);
   Material textured;
   const Material& mat = m_scene->materialAt(hit, textured);
-  if (!mat.isDiffuse()) return Vec3(0.0f);
-  // Diffuse reflection of the irradiance: albedo / pi (Oren-Nayar taken as Lambertian here).
+  if (!mat.hasDiffuseBase()) return Vec3(0.0f);
+  // Diffuse reflection of the irradiance: albedo / pi (Oren-Nayar taken as Lambertian here, a
+  // coated base by its reflectance through the coat, diffuseReflectance).
   Vec3 e;
   if (!cachedIrradiance(hit.position, hit.positionError, side, e)) e = irradianceAt(hit.position, hit.positionError, side);
-  return mat.albedo * kInvPi * e;
+  return diffuseReflectance(mat) * kInvPi * e;
 }
 
 }  // namespace voxcone

@@ -79,9 +79,10 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
     Material textured;
     const Material& mat = scene.materialAt(sh, textured);
 
-    // Store at diffuse hits only (Lambertian, Oren-Nayar): the voxel field gathers diffuse
-    // radiance, and glossy lobes are not view-independent, so a glossy hit stores nothing.
-    if (mat.isDiffuse()) {
+    // Store at diffuse hits only (Lambertian, Oren-Nayar, a coat's diffuse base): the voxel
+    // field gathers diffuse radiance, and glossy lobes are not view-independent, so a glossy
+    // hit stores nothing.
+    if (mat.hasDiffuseBase()) {
       // A one-sided surface hit from behind reflects nothing: no photon, and the path ends
       // there (bsdfSample fails below), so its back never lights the field.
       if (mat.blackFrom(glm::dot(sh.shadingNormal, woWorld))) return;
@@ -147,7 +148,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   if (settings.aimCaustics) {
     Bounds3 specular;
     for (size_t t = 0; t < scene.triangles.size(); ++t)
-      if (scene.materials[scene.triMaterial[t]].isDelta())
+      if (scene.materials[scene.triMaterial[t]].hasDeltaLobe())
         for (uint32_t v : {scene.triangles[t].x, scene.triangles[t].y, scene.triangles[t].z}) specular.extend(scene.positions[v]);
     if (!specular.empty()) {
       aim.center = 0.5f * (specular.lo + specular.hi);

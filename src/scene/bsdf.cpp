@@ -214,7 +214,168 @@ float roughConductorPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
   return microfacet::visibleNormalPdf(m.distribution, alphaOf(m), wo, wm) / (4.0f * dotO);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Coated diffuse (Mitsuba 3 plastic / roughplastic). wo, wi in the upper hemisphere.
+//
+// Light refracts through the coat (transmittance T(cos)), scatters at the Lambertian base,
+// and leaves through the coat; what the coat reflects back in is scattered again, a geometric
+// series summed in closed form: base = albedo / (1 - Fdr_int) (or albedo / (1 - albedo Fdr_int)
+// when nonlinear), over eta^2 for the radiance compressed inside (Weidlich & Wilkie 2007;
+// Mitsuba's plastic and roughplastic):
+//   f_base(wo, wi) = base / (pi eta^2) T(cos_o) T(cos_i).
+
+float coatTransmittance(const Material& m, float cosTheta) {
+  const float c = std::clamp(cosTheta, 0.0f, 1.0f);
+  if (m.type == MaterialType::Plastic) return 1.0f - fresnelDielectric(c, m.ior);
+  const float x = c * float(CoatTable::kSize - 1);
+  const int i = std::min(int(x), CoatTable::kSize - 2);
+  const float t = x - float(i);
+  return (1.0f - t) * m.coat.transmittance[i] + t * m.coat.transmittance[i + 1];
+}
+
+Vec3 coatedBase(const Material& m) {
+  const float ri = m.coat.internalReflectance;
+  const Vec3 denom = m.coatNonlinear ? Vec3(1.0f) - m.albedo * ri : Vec3(1.0f - ri);
+  return m.albedo / (denom * sqr(m.ior));
+}
+
+Vec3 coatedBaseEval(const Material& m, const Vec3& wo, const Vec3& wi) {
+  if (!(m.coat.internalReflectance >= 0.0f)) return Vec3(0.0f);
+  return coatedBase(m) * (kInvPi * coatTransmittance(m, wo.z) * coatTransmittance(m, wi.z));
+}
+
+Vec3 roughCoatEval(const Material& m, const Vec3& wo, const Vec3& wi) {
+  Vec3 wm = wo + wi;
+  const float len2 = glm::dot(wm, wm);
+  if (!(len2 > 0.0f)) return Vec3(0.0f);
+  wm /= std::sqrt(len2);
+  const float alpha = alphaOf(m);
+  const float d = microfacet::distributionD(m.distribution, alpha, wm);
+  const float g = microfacet::g2(m.distribution, alpha, wo, wi, false);
+  return m.specular * (fresnelDielectric(glm::dot(wo, wm), m.ior) * d * g / (4.0f * wo.z * wi.z));
+}
+
+/// The probability of sampling the coat for wo: its reflectance (F, or 1 - T for a rough coat)
+/// times the specular tint's share of tint + albedo (Mitsuba's specular sampling weight), over
+/// that plus the base's share times T.
+float coatProbability(const Material& m, float cosO) {
+  const float s = luminance(m.specular), a = luminance(m.albedo);
+  const float sw = s + a > 0.0f ? s / (s + a) : 0.5f;
+  const float r = 1.0f - coatTransmittance(m, cosO);
+  const float ps = r * sw, pd = (1.0f - r) * (1.0f - sw);
+  return ps + pd > 0.0f ? ps / (ps + pd) : 0.5f;
+}
+
+Vec3 coatedEval(const Material& m, const Vec3& wo, const Vec3& wi) {
+  Vec3 f = coatedBaseEval(m, wo, wi);
+  if (m.type == MaterialType::RoughPlastic) f += roughCoatEval(m, wo, wi);
+  return f;
+}
+
+float coatedPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
+  const float ps = coatProbability(m, wo.z);
+  float pdf = (1.0f - ps) * cosineHemispherePdf(wi.z);
+  if (m.type == MaterialType::RoughPlastic) pdf += ps * roughConductorPdf(m, wo, wi);
+  return pdf;
+}
+
+/// The coat's directional albedo for a direction at cos theta = mu from the side where the
+/// Fresnel term is fresnelDielectric(+/-cos, ior) (`inside`: from within the coat): the
+/// visible-normal estimator F G2 / G1 (Heitz 2018) on an n x n stratified grid.
+double roughCoatAlbedo(const Material& m, double mu, bool inside) {
+  constexpr int n = 32;
+  const Vec3 wo(float(std::sqrt(std::max(0.0, 1.0 - mu * mu))), 0.0f, float(mu));
+  const float alpha = alphaOf(m);
+  double sum = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const Vec2 u((float(i) + 0.5f) / float(n), (float(j) + 0.5f) / float(n));
+      const Vec3 wm = microfacet::sampleVisibleNormal(m.distribution, alpha, wo, u);
+      const Vec3 wi = reflect(wo, wm);
+      if (!(wi.z > 0.0f)) continue;
+      const float c = glm::dot(wo, wm);
+      const float fr = fresnelDielectric(inside ? -c : c, m.ior);
+      sum += double(fr) * microfacet::g2(m.distribution, alpha, wo, wi, false) / microfacet::g1(m.distribution, alpha, wo);
+    }
+  return sum / double(n * n);
+}
+
 }  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Coated diffuse: precomputation and the lobes apart
+
+void prepareMaterial(MaterialParams& params) {
+  if (params.type != MaterialType::Plastic && params.type != MaterialType::RoughPlastic) return;
+  Material m;
+  static_cast<MaterialParams&>(m) = params;
+  const bool rough = m.type == MaterialType::RoughPlastic;
+  // The coat's reflectance at cos theta = mu, from outside or from inside (total internal
+  // reflection included), and its cosine-weighted hemispherical average 2 int R(mu) mu dmu by
+  // the midpoint rule (TIR's kink inside makes a coarse rule visibly wrong).
+  const auto reflectance = [&](double mu, bool inside) {
+    return rough ? roughCoatAlbedo(m, mu, inside) : double(fresnelDielectric(float(inside ? -mu : mu), m.ior));
+  };
+  const auto average = [&](bool inside) {
+    const int n = rough ? 256 : 4096;
+    double sum = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const double mu = (i + 0.5) / n;
+      sum += reflectance(mu, inside) * mu;
+    }
+    return 2.0 * sum / n;
+  };
+  CoatTable& table = params.coat;
+  for (int i = 0; i < CoatTable::kSize; ++i) {
+    const double mu = std::max(1e-4, double(i) / double(CoatTable::kSize - 1));
+    table.transmittance[i] = float(1.0 - reflectance(mu, false));
+  }
+  table.externalAlbedo = float(average(false));
+  table.internalReflectance = float(average(true));
+}
+
+Vec3 bsdfEvalBase(const Material& m, const Vec3& wo, const Vec3& wi) {
+  if (m.isDiffuse()) return bsdfEval(m, wo, wi);
+  if (!m.isCoated() || !validDir(wo) || !validDir(wi) || !(wo.z * wi.z > 0.0f)) return Vec3(0.0f);
+  if (m.blackFrom(wo.z) || m.blackFrom(wi.z)) return Vec3(0.0f);
+  const bool flip = wo.z < 0.0f;
+  const Vec3 f = coatedBaseEval(m, upper(wo, flip), upper(wi, flip));
+  return isFinite(f) ? f : Vec3(0.0f);
+}
+
+bool coatSample(const Material& m, const Vec3& wo, const Vec2& u, BsdfSample& out) {
+  out = BsdfSample{};
+  if (!m.isCoated() || !validDir(wo) || m.blackFrom(wo.z)) return false;
+  const bool flip = wo.z < 0.0f;
+  const Vec3 o = upper(wo, flip);
+  if (m.type == MaterialType::Plastic) {
+    out.wi = upper(Vec3(-o.x, -o.y, o.z), flip);
+    out.pdf = 1.0f;
+    out.delta = true;
+    out.weight = m.specular * fresnelDielectric(o.z, m.ior);
+  } else {
+    const float alpha = alphaOf(m);
+    const Vec3 wm = microfacet::sampleVisibleNormal(m.distribution, alpha, o, u);
+    const Vec3 i = reflect(o, wm);
+    if (!(i.z > 0.0f)) return false;
+    out.pdf = roughConductorPdf(m, o, i);
+    out.wi = upper(i, flip);
+    out.weight = m.specular * fresnelDielectric(glm::dot(o, wm), m.ior) *
+                 (microfacet::g2(m.distribution, alpha, o, i, false) / microfacet::g1(m.distribution, alpha, o));
+  }
+  if (!isFinite(out.weight) || !(out.pdf > 0.0f) || !validDir(out.wi) || isBlack(out.weight)) {
+    out = BsdfSample{};
+    return false;
+  }
+  return true;
+}
+
+Vec3 diffuseReflectance(const Material& m) {
+  if (m.isDiffuse()) return m.albedo;
+  if (!m.isCoated() || !(m.coat.internalReflectance >= 0.0f)) return Vec3(0.0f);
+  // f_base integrated: base / eta^2 T(cos_o) (1 - R_ext); T(cos_o) averaged the same way.
+  return coatedBase(m) * sqr(1.0f - m.coat.externalAlbedo);
+}
 
 // ---------------------------------------------------------------------------------------------
 // Fresnel
@@ -272,16 +433,20 @@ Vec3 bsdfEval(const Material& m, const Vec3& wo, const Vec3& wi, TransportMode m
   switch (m.type) {
     case MaterialType::Mirror:
     case MaterialType::Dielectric:
+    case MaterialType::ThinDielectric:
     case MaterialType::Conductor: return Vec3(0.0f);
     case MaterialType::RoughDielectric: f = roughDielectricEval(m, wo, wi, mode); break;
     case MaterialType::Lambertian:
     case MaterialType::OrenNayar:
-    case MaterialType::RoughConductor: {
+    case MaterialType::RoughConductor:
+    case MaterialType::Plastic:
+    case MaterialType::RoughPlastic: {
       if (!(wo.z * wi.z > 0.0f)) return Vec3(0.0f);
       const bool flip = wo.z < 0.0f;
       const Vec3 o = upper(wo, flip), i = upper(wi, flip);
       if (m.type == MaterialType::Lambertian) f = m.albedo * kInvPi;
       else if (m.type == MaterialType::OrenNayar) f = orenNayar(m, o, i);
+      else if (m.isCoated()) f = coatedEval(m, o, i);
       else f = roughConductorEval(m, o, i);
       break;
     }
@@ -296,15 +461,20 @@ float bsdfPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
   switch (m.type) {
     case MaterialType::Mirror:
     case MaterialType::Dielectric:
+    case MaterialType::ThinDielectric:
     case MaterialType::Conductor: return 0.0f;
     case MaterialType::RoughDielectric: pdf = roughDielectricPdf(m, wo, wi); break;
     case MaterialType::Lambertian:
     case MaterialType::OrenNayar:
-    case MaterialType::RoughConductor: {
+    case MaterialType::RoughConductor:
+    case MaterialType::Plastic:
+    case MaterialType::RoughPlastic: {
       if (!(wo.z * wi.z > 0.0f)) return 0.0f;
       const bool flip = wo.z < 0.0f;
       const Vec3 o = upper(wo, flip), i = upper(wi, flip);
-      pdf = m.type == MaterialType::RoughConductor ? roughConductorPdf(m, o, i) : cosineHemispherePdf(i.z);
+      pdf = m.type == MaterialType::RoughConductor ? roughConductorPdf(m, o, i)
+            : m.isCoated()                         ? coatedPdf(m, o, i)
+                                                   : cosineHemispherePdf(i.z);
       break;
     }
   }
@@ -370,6 +540,48 @@ bool bsdfSample(const Material& m, const Vec3& wo, float uc, const Vec2& u, Bsdf
                    (microfacet::g2(dist, alpha, o, i, false) / microfacet::g1(dist, alpha, o));
       break;
     }
+    case MaterialType::ThinDielectric: {
+      // Both faces' reflections and every internal bounce summed (no absorption): R' = R + T^2 R
+      // / (1 - R^2) = 2R / (1 + R); the rest passes straight through.
+      const float r = fresnelDielectric(std::fabs(wo.z), m.ior);
+      const float rt = r < 1.0f ? 2.0f * r / (1.0f + r) : 1.0f;
+      out.delta = true;
+      out.weight = m.specular;
+      if (uc < rt) {
+        out.wi = Vec3(-wo.x, -wo.y, wo.z);
+        out.pdf = rt;
+      } else {
+        out.wi = -wo;
+        out.pdf = 1.0f - rt;
+        out.transmission = true;
+      }
+      break;
+    }
+    case MaterialType::Plastic:
+    case MaterialType::RoughPlastic: {
+      if (!(m.coat.internalReflectance >= 0.0f)) return false;
+      const Vec3 o = upper(wo, flip);
+      const float ps = coatProbability(m, o.z);
+      if (m.type == MaterialType::Plastic && uc < ps) {
+        out.wi = upper(Vec3(-o.x, -o.y, o.z), flip);
+        out.pdf = ps;
+        out.delta = true;
+        out.weight = m.specular * (fresnelDielectric(o.z, m.ior) / ps);
+        break;
+      }
+      Vec3 i;
+      if (uc < ps) {
+        i = reflect(o, microfacet::sampleVisibleNormal(m.distribution, alphaOf(m), o, u));
+      } else {
+        i = sampleCosineHemisphere(u);
+      }
+      if (!(i.z > 0.0f)) return false;
+      out.pdf = coatedPdf(m, o, i);
+      if (!(out.pdf > 0.0f)) return false;
+      out.wi = upper(i, flip);
+      out.weight = coatedEval(m, o, i) * (i.z / out.pdf);
+      break;
+    }
     case MaterialType::RoughDielectric: {
       // An index-matched interface refracts straight through: the transmission lobe is a delta.
       if (std::fabs(m.ior - 1.0f) < 1e-5f) {
@@ -405,6 +617,19 @@ int bsdfDeltaLobes(const Material& m, const Vec3& wo, DeltaLobe out[2], Transpor
     case MaterialType::Conductor:
       out[0] = DeltaLobe{wr, m.specular * fresnelConductor(wo.z, m.eta, m.k), false};
       return 1;
+    case MaterialType::Plastic: {
+      if (!(m.coat.internalReflectance >= 0.0f)) return 0;
+      out[0] = DeltaLobe{wr, m.specular * fresnelDielectric(std::fabs(wo.z), m.ior), false};
+      return 1;
+    }
+    case MaterialType::ThinDielectric: {
+      const float r = fresnelDielectric(std::fabs(wo.z), m.ior);
+      const float rt = r < 1.0f ? 2.0f * r / (1.0f + r) : 1.0f;
+      out[0] = DeltaLobe{wr, m.specular * rt, false};
+      if (rt >= 1.0f) return 1;
+      out[1] = DeltaLobe{-wo, m.specular * (1.0f - rt), true};
+      return 2;
+    }
     case MaterialType::Dielectric: {
       const float fr = fresnelDielectric(wo.z, m.ior);
       out[0] = DeltaLobe{wr, m.specular * fr, false};

@@ -455,6 +455,18 @@ public:
     p.getBool("sample_visible", true);
   }
 
+  /// A diffuse albedo `name`: a colour or a bitmap texture (then the albedo factor is 1).
+  void diffuseAlbedo(Props& p, Material& m, const std::string& name) {
+    m.albedo = p.getColor(name, Vec3(0.5f), 0.0f, 1.0f);
+    for (const Node& t : p.takeObjects("texture")) {
+      if (!hasAttr(t, "name") || attr(t, "name") != name)
+        fail(t, "a texture of " + p.type() + " must be its '" + name + "' (voxcone textures the diffuse albedo only)");
+      if (p.has(name) || m.albedoTexture >= 0) fail(t, "parameter '" + name + "' given twice");
+      m.albedoTexture = bitmapTexture(resolve(t, "texture"));
+      m.albedo = Vec3(1.0f);
+    }
+  }
+
   Material parseBsdf(const Node& n, bool insideTwoSided) {
     allowAttrs(n, {"type", "id", "name"});
     Props p(*this, n);
@@ -473,14 +485,17 @@ public:
       m.twoSided = true;
     } else if (type == "diffuse") {
       m.type = MaterialType::Lambertian;
-      m.albedo = p.getColor("reflectance", Vec3(0.5f), 0.0f, 1.0f);
-      for (const Node& t : p.takeObjects("texture")) {
-        if (!hasAttr(t, "name") || attr(t, "name") != "reflectance")
-          fail(t, "a texture of diffuse must be its 'reflectance' (voxcone textures the albedo only)");
-        if (p.has("reflectance") || m.albedoTexture >= 0) fail(t, "parameter 'reflectance' given twice");
-        m.albedoTexture = bitmapTexture(resolve(t, "texture"));
-        m.albedo = Vec3(1.0f);
-      }
+      diffuseAlbedo(p, m, "reflectance");
+    } else if (type == "plastic" || type == "roughplastic") {
+      m.type = type == "plastic" ? MaterialType::Plastic : MaterialType::RoughPlastic;
+      diffuseAlbedo(p, m, "diffuse_reflectance");
+      m.specular = p.getColor("specular_reflectance", Vec3(1.0f), 0.0f, 1.0f);
+      // Mitsuba's defaults: int_ior polypropylene, ext_ior air.
+      m.ior = iorOf(p, "int_ior", "polypropylene") / iorOf(p, "ext_ior", "air");
+      if (!(m.ior >= 1.0001f && m.ior <= 10.0f))
+        fail(n, "int_ior / ext_ior = " + std::to_string(m.ior) + ": voxcone's coats need a ratio in [1.0001, 10]");
+      m.coatNonlinear = p.getBool("nonlinear", false);
+      if (m.type == MaterialType::RoughPlastic) roughness(p, m);
     } else if (type == "conductor" || type == "roughconductor") {
       const std::string preset = p.getString("material", "none");
       if (p.has("eta") || p.has("k") || preset == "none") {
@@ -504,8 +519,10 @@ public:
         m.type = MaterialType::RoughConductor;
         roughness(p, m);
       }
-    } else if (type == "dielectric" || type == "roughdielectric") {
-      m.type = type == "dielectric" ? MaterialType::Dielectric : MaterialType::RoughDielectric;
+    } else if (type == "dielectric" || type == "roughdielectric" || type == "thindielectric") {
+      m.type = type == "dielectric"       ? MaterialType::Dielectric
+               : type == "thindielectric" ? MaterialType::ThinDielectric
+                                          : MaterialType::RoughDielectric;
       // Mitsuba's defaults: int_ior bk7, ext_ior air.
       const float intIor = iorOf(p, "int_ior", "bk7"), extIor = iorOf(p, "ext_ior", "air");
       m.ior = intIor / extIor;
@@ -517,15 +534,9 @@ public:
       m.specular = r;
       m.twoSided = true;  // both sides are the model; the flag is ignored for transmissive materials
       if (m.type == MaterialType::RoughDielectric) roughness(p, m);
-    } else if (type == "thindielectric") {
-      fail(n, "unsupported BSDF plugin 'thindielectric': voxcone has no thin dielectric (a sheet that reflects and "
-              "transmits without refracting)");
-    } else if (type == "plastic" || type == "roughplastic") {
-      fail(n, "unsupported BSDF plugin '" + type + "': voxcone has no plastic material (a diffuse base under a "
-              "dielectric coating)");
     } else {
-      fail(n, "unsupported BSDF plugin '" + type + "' (voxcone maps diffuse, twosided, dielectric, roughdielectric, "
-              "conductor, roughconductor)");
+      fail(n, "unsupported BSDF plugin '" + type + "' (voxcone maps diffuse, plastic, roughplastic, twosided, "
+              "dielectric, roughdielectric, thindielectric, conductor, roughconductor)");
     }
     p.finish();
     return m;

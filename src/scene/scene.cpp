@@ -1,5 +1,7 @@
 #include "voxcone/scene/scene.h"
 
+#include "voxcone/scene/bsdf.h"
+
 #include "voxcone/core/error.h"
 #include "voxcone/core/sampling.h"
 
@@ -21,6 +23,7 @@ float Scene::triangleArea(uint32_t t) const {
 }
 
 void Scene::finalize() {
+  for (Material& m : materials) prepareMaterial(m);
   m_bounds = Bounds3();
   for (const Vec3& p : positions) m_bounds.extend(p);
 

@@ -145,7 +145,8 @@ Material parseMaterial(Reader& r, const std::string& name, std::string& albedoTe
   Material m;
   m.name = name;
   const std::string type = r.string("type", "", true);
-  if (type == "lambertian" || type == "diffuse" || type == "oren_nayar") {
+  const bool plastic = type == "plastic" || type == "rough_plastic";
+  if (type == "lambertian" || type == "diffuse" || type == "oren_nayar" || plastic) {
     m.type = type == "oren_nayar" ? MaterialType::OrenNayar : MaterialType::Lambertian;
     albedoTexture = r.string("albedo_texture", "");
     if (r.has("albedo_texture") && albedoTexture.empty()) r.fail("expected a file name", "albedo_texture");
@@ -155,6 +156,15 @@ Material parseMaterial(Reader& r, const std::string& name, std::string& albedoTe
     // albedo above
   } else if (type == "oren_nayar") {
     m.sigmaRad = glm::radians(r.number("sigma_deg", 20.0f, 0.0f, 90.0f));
+  } else if (plastic) {
+    m.type = type == "plastic" ? MaterialType::Plastic : MaterialType::RoughPlastic;
+    m.ior = r.number("ior", 1.5f, 1.0001f, 10.0f);
+    m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
+    m.coatNonlinear = r.boolean("nonlinear", false);
+  } else if (type == "thin_dielectric") {
+    m.type = MaterialType::ThinDielectric;
+    m.ior = r.number("ior", 1.5f, 1.0001f, 10.0f);
+    m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
   } else if (type == "mirror") {
     m.type = MaterialType::Mirror;
     m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
@@ -169,10 +179,12 @@ Material parseMaterial(Reader& r, const std::string& name, std::string& albedoTe
     m.specular = r.rgb("specular", Vec3(1.0f), 0.0f, 1.0f);
   } else {
     r.fail("unknown material type '" + type +
-               "' (lambertian, oren_nayar, mirror, dielectric, rough_dielectric, conductor, rough_conductor)",
+               "' (lambertian, oren_nayar, plastic, rough_plastic, mirror, dielectric, rough_dielectric, "
+               "thin_dielectric, conductor, rough_conductor)",
            "type");
   }
-  if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric) {
+  if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric ||
+      m.type == MaterialType::RoughPlastic) {
     m.roughness = r.number("roughness", 0.1f, 1e-4f, 1.0f);
     const std::string dist = r.string("distribution", "ggx");
     if (dist == "ggx")

@@ -179,8 +179,18 @@ nlohmann::json materialJson(const Material& m) {
       j = {{"type", m.type == MaterialType::Conductor ? "conductor" : "rough_conductor"}, {"eta", cleanVec(m.eta)},
            {"k", cleanVec(m.k)}, {"specular", cleanVec(m.specular)}};
       break;
+    case MaterialType::Plastic:
+    case MaterialType::RoughPlastic:
+      j = {{"type", m.type == MaterialType::Plastic ? "plastic" : "rough_plastic"}, {"albedo", cleanVec(m.albedo)},
+           {"ior", clean(m.ior)}, {"specular", cleanVec(m.specular)}};
+      if (m.coatNonlinear) j["nonlinear"] = true;
+      break;
+    case MaterialType::ThinDielectric:
+      j = {{"type", "thin_dielectric"}, {"ior", clean(m.ior)}, {"specular", cleanVec(m.specular)}};
+      break;
   }
-  if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric) {
+  if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric ||
+      m.type == MaterialType::RoughPlastic) {
     j["roughness"] = clean(m.roughness);
     j["distribution"] = distributionName(m.distribution);
   }
@@ -212,18 +222,41 @@ std::string bsdfXml(const Material& m, const std::string& id, const std::string&
     os << in << "  <float name=\"alpha\" value=\"" << floatText(m.roughness) << "\"/>\n";
     os << in << "  <string name=\"distribution\" value=\"" << distributionName(m.distribution) << "\"/>\n";
   };
+  // The diffuse albedo, a colour or a bitmap.
+  const auto albedo = [&](const char* name) {
+    if (texture.empty()) {
+      rgb(name, m.albedo);
+      return;
+    }
+    if (m.albedo != Vec3(1.0f))
+      throw SceneError(m.name, "", "a textured albedo with a factor other than 1 has no Mitsuba 3 form");
+    os << in << "  <texture type=\"bitmap\" name=\"" << name << "\">\n"
+       << in << "    <string name=\"filename\" value=\"" << xmlEscape(texture) << "\"/>\n"
+       << in << "  </texture>\n";
+  };
+  const auto iors = [&] {
+    os << in << "  <float name=\"int_ior\" value=\"" << floatText(m.ior) << "\"/>\n";
+    os << in << "  <float name=\"ext_ior\" value=\"1\"/>\n";
+  };
   switch (m.type) {
     case MaterialType::Lambertian:
       os << in << "<bsdf type=\"diffuse\"" << ownId << ">\n";
-      if (texture.empty()) {
-        rgb("reflectance", m.albedo);
-      } else {
-        if (m.albedo != Vec3(1.0f))
-          throw SceneError(m.name, "", "a textured albedo with a factor other than 1 has no Mitsuba 3 diffuse form");
-        os << in << "  <texture type=\"bitmap\" name=\"reflectance\">\n"
-           << in << "    <string name=\"filename\" value=\"" << xmlEscape(texture) << "\"/>\n"
-           << in << "  </texture>\n";
-      }
+      albedo("reflectance");
+      break;
+    case MaterialType::Plastic:
+    case MaterialType::RoughPlastic:
+      os << in << "<bsdf type=\"" << (m.type == MaterialType::Plastic ? "plastic" : "roughplastic") << "\"" << ownId << ">\n";
+      albedo("diffuse_reflectance");
+      rgb("specular_reflectance", m.specular);
+      iors();
+      if (m.coatNonlinear) os << in << "  <boolean name=\"nonlinear\" value=\"true\"/>\n";
+      if (m.type == MaterialType::RoughPlastic) rough();
+      break;
+    case MaterialType::ThinDielectric:
+      os << in << "<bsdf type=\"thindielectric\"" << ownId << ">\n";
+      iors();
+      rgb("specular_reflectance", m.specular);
+      rgb("specular_transmittance", m.specular);
       break;
     case MaterialType::OrenNayar:
       throw SceneError(m.name, "", "material type oren_nayar has no Mitsuba 3 BSDF");
@@ -243,8 +276,7 @@ std::string bsdfXml(const Material& m, const std::string& id, const std::string&
     case MaterialType::Dielectric:
     case MaterialType::RoughDielectric:
       os << in << "<bsdf type=\"" << (m.type == MaterialType::Dielectric ? "dielectric" : "roughdielectric") << "\"" << ownId << ">\n";
-      os << in << "  <float name=\"int_ior\" value=\"" << floatText(m.ior) << "\"/>\n";
-      os << in << "  <float name=\"ext_ior\" value=\"1\"/>\n";
+      iors();
       rgb("specular_reflectance", m.specular);
       rgb("specular_transmittance", m.specular);
       if (m.type == MaterialType::RoughDielectric) rough();

@@ -59,7 +59,7 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
                         std::to_string(settings.causticLevel));
   if (scene.triangleCount() == 0 || scene.bounds().empty()) throw SettingsError("cannot voxelize a scene without triangles");
   if (std::all_of(scene.triMaterial.begin(), scene.triMaterial.end(),
-                  [&](uint32_t m) { return scene.materials[m].type == MaterialType::Dielectric; }))
+                  [&](uint32_t m) { return scene.materials[m].isClearGlass(); }))
     throw SettingsError("cannot voxelize a scene of smooth glass alone: the field holds no glass (nothing to gather)");
   if (!(settings.padding >= 0.0 && settings.padding <= 1.0))
     throw SettingsError("field padding must be in [0, 1] (a fraction of the scene's side), got " +

@@ -129,7 +129,7 @@ uint64_t voxelBoxBound(const Scene& scene, const DVec3& origin, double voxelSize
       [&](const tbb::blocked_range<size_t>& r, uint64_t sum) {
         int32_t lo[3], hi[3];
         for (size_t t = r.begin(); t != r.end(); ++t)
-          if (scene.materials[scene.triMaterial[t]].type != MaterialType::Dielectric)
+          if (!scene.materials[scene.triMaterial[t]].isClearGlass())
             sum += uint64_t(triangleVoxelRange(scene, t, origin, invVoxel, maxIndex, lo, hi));
         return sum;
       },
@@ -185,7 +185,7 @@ size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSi
     const size_t end = std::min(triCount, (chunk + 1) * kItemChunk);
     for (size_t t = chunk * kItemChunk; t < end; ++t) {
       // Smooth glass is not in the field (VoxelField::voxelize): cones see through it.
-      if (scene.materials[scene.triMaterial[t]].type == MaterialType::Dielectric) continue;
+      if (scene.materials[scene.triMaterial[t]].isClearGlass()) continue;
       WorkItem item{uint32_t(t), {0, 0, 0}, {0, 0, 0}, false};
       const int64_t count = triangleVoxelRange(scene, t, origin, invVoxel, maxIndex, item.lo, item.hi);
       if (!reachesListed(item.lo, item.hi)) continue;
@@ -405,7 +405,7 @@ size_t voxelizeTriangles(const Scene& scene, const DVec3& origin, double voxelSi
         area += w;
         normal += (glm::dot(n, reference) < 0.0 ? -w : w) * n;
         // Specular-only surfaces add area (opacity) but gather no diffuse light.
-        if (scene.materials[scene.triMaterial[all[b].triangle]].isDiffuse()) diffuseArea += w;
+        if (scene.materials[scene.triMaterial[all[b].triangle]].hasDiffuseBase()) diffuseArea += w;
       }
       const double len = glm::length(normal);
       out.keys[r] = all[a].key;

@@ -61,19 +61,20 @@ TEST_F(MitsubaCli, UnsupportedPluginExitsTwoWithOneLineNamingIt) {
     std::ifstream f(xml());
     text.assign((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   }
-  // The red wall's BSDF becomes plastic, at its line of data/scenes/cornell-box.xml.
+  // The red wall's BSDF becomes principled (which voxcone does not map), at its line of data/scenes/cornell-box.xml.
   const std::string from = "<bsdf type=\"twosided\" id=\"red\">";
   const size_t at = text.find(from);
   ASSERT_NE(at, std::string::npos);
   const int line = 1 + int(std::count(text.begin(), text.begin() + long(at), '\n'));
-  text.replace(at, from.size(), "<bsdf type=\"plastic\" id=\"red\">");
+  text.replace(at, from.size(), "<bsdf type=\"principled\" id=\"red\">");
   std::filesystem::copy(test::sourceDir() + "/data/scenes/mitsuba", m_dir / "mitsuba");
-  const std::string scene = write("plastic.xml", text);
+  const std::string scene = write("principled.xml", text);
   for (const std::string& cmd : {"render " + scene + " -q -o " + path("out"), "info " + scene}) {
     const Result r = run(cmd);
     EXPECT_EQ(r.code, 2) << cmd;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    EXPECT_NE(r.err.find("plastic.xml: line " + std::to_string(line) + ": <bsdf type=\"plastic\" id=\"red\">: unsupported BSDF plugin 'plastic'"),
+    EXPECT_NE(r.err.find("principled.xml: line " + std::to_string(line) +
+                         ": <bsdf type=\"principled\" id=\"red\">: unsupported BSDF plugin 'principled'"),
               std::string::npos)
         << r.err;
   }

@@ -479,9 +479,12 @@ TEST(MitsubaBsdf, DielectricsWithNamedAndNumericIors) {
   EXPECT_NE(errorOf(xmlScene(R"(<shape type="rectangle"><bsdf type="dielectric"><string name="int_ior" value="unobtainium"/></bsdf></shape>)"))
                 .find("unobtainium"),
             std::string::npos);
-  const std::string thin = errorOf(xmlScene("<shape type=\"rectangle\">\n<bsdf type=\"thindielectric\"/></shape>"));
-  EXPECT_NE(thin.find("unsupported BSDF plugin 'thindielectric'"), std::string::npos) << thin;
-  EXPECT_NE(thin.find("line 10"), std::string::npos) << thin;
+  const std::string glass = errorOf(xmlScene("<shape type=\"rectangle\">\n<bsdf type=\"thindielectric\"><float name=\"int_ior\" value=\"0.9\"/></bsdf></shape>"));
+  EXPECT_NE(glass.find("int_ior = 0.9 is outside"), std::string::npos) << glass;
+  EXPECT_NE(glass.find("line 10"), std::string::npos) << glass;
+  m = bsdf(R"(<bsdf type="thindielectric"/>)");
+  EXPECT_EQ(m.type, MaterialType::ThinDielectric);
+  EXPECT_FLOAT_EQ(m.ior, 1.5046f / 1.000277f);
 }
 
 TEST(MitsubaBsdf, ConductorsPresetsAndRoughness) {
@@ -520,10 +523,31 @@ TEST(MitsubaBsdf, ConductorsPresetsAndRoughness) {
             std::string::npos);
 }
 
+TEST(MitsubaBsdf, PlasticsWithMitsubasDefaults) {
+  Material m = bsdf(R"(<bsdf type="plastic"/>)");  // polypropylene in air, diffuse 0.5, linear
+  EXPECT_EQ(m.type, MaterialType::Plastic);
+  EXPECT_FLOAT_EQ(m.ior, 1.49f / 1.000277f);
+  EXPECT_EQ(m.albedo, Vec3(0.5f));
+  EXPECT_EQ(m.specular, Vec3(1.0f));
+  EXPECT_FALSE(m.coatNonlinear);
+  EXPECT_FALSE(m.twoSided);
+  m = bsdf(R"(<bsdf type="roughplastic"><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/>)"
+           R"(<float name="alpha" value="0.3"/><boolean name="nonlinear" value="true"/><float name="int_ior" value="1.6"/></bsdf>)");
+  EXPECT_EQ(m.type, MaterialType::RoughPlastic);
+  EXPECT_EQ(m.albedo, Vec3(0.1f, 0.2f, 0.3f));
+  EXPECT_FLOAT_EQ(m.roughness, 0.3f);
+  EXPECT_EQ(m.distribution, MicrofacetDistribution::Beckmann);  // Mitsuba's default
+  EXPECT_TRUE(m.coatNonlinear);
+  EXPECT_FLOAT_EQ(m.ior, 1.6f / 1.000277f);
+  const std::string wrong = errorOf(xmlScene(R"(<shape type="rectangle"><bsdf type="plastic"><texture type="bitmap" name="reflectance"/></bsdf></shape>)"));
+  EXPECT_NE(wrong.find("must be its 'diffuse_reflectance'"), std::string::npos) << wrong;
+}
+
 TEST(MitsubaBsdf, UnsupportedPluginsAndParametersNameElementAndLine) {
-  const std::string plastic = errorOf(xmlScene("\n\n<bsdf type=\"plastic\" id=\"p\"/>" + kRect));
-  EXPECT_NE(plastic.find("test.xml: line 11: <bsdf type=\"plastic\" id=\"p\">: unsupported BSDF plugin 'plastic'"), std::string::npos)
-      << plastic;
+  const std::string principled = errorOf(xmlScene("\n\n<bsdf type=\"principled\" id=\"p\"/>" + kRect));
+  EXPECT_NE(principled.find("test.xml: line 11: <bsdf type=\"principled\" id=\"p\">: unsupported BSDF plugin 'principled'"),
+            std::string::npos)
+      << principled;
   EXPECT_NE(errorOf(xmlScene(R"(<shape type="rectangle"><bsdf type="blendbsdf"/></shape>)")).find("'blendbsdf'"), std::string::npos);
   const std::string param = errorOf(xmlScene("<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<float name=\"roughness\" value=\"1\"/></bsdf></shape>"));
   EXPECT_NE(param.find("unsupported parameter 'roughness' of bsdf 'diffuse'"), std::string::npos) << param;

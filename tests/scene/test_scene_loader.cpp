@@ -67,7 +67,7 @@ TEST(SceneLoader, BadInputNamesTheKeyPath) {
       {replaced(m, "\"emission\": [1, 1, 1]", "\"emission\": [1, -1, 1]"), "materials.m.emission: component 1 is -1"},
       {replaced(m, "\"emission\": [1, 1, 1]", "\"emission\": [1e999, 1, 1]"),
        "invalid JSON: a number too large for a double at line 3: 1e999"},
-      {replaced(m, "\"type\": \"lambertian\"", "\"type\": \"plastic\""), "materials.m.type: unknown material type"},
+      {replaced(m, "\"type\": \"lambertian\"", "\"type\": \"principled\""), "materials.m.type: unknown material type"},
       {replaced(m, "\"material\": \"m\"", "\"material\": \"x\""), "shapes[0].material: unknown material 'x'"},
       {replaced(m, "\"type\": \"quad\"", "\"type\": \"triangle\""), "shapes[0].vertices: expected 3 vertices"},
       {replaced(m, "\"type\": \"quad\"", "\"type\": \"quad\", \"colour\": 1"), "shapes[0].colour: unknown key"},

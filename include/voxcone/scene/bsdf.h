@@ -69,8 +69,24 @@ float fresnelDielectric(float cosThetaI, float eta);
 /// Unpolarized Fresnel reflectance of a conductor with complex IOR eta + i k, per channel.
 Vec3 fresnelConductor(float cosThetaI, const Vec3& eta, const Vec3& k);
 
-/// Albedo-like reflectance used to choose photon survival / to report a material's
-/// diffuse reflectance (albedo for diffuse, 0 otherwise).
-inline Vec3 diffuseReflectance(const Material& m) { return m.isDiffuse() ? m.albedo : Vec3(0.0f); }
+/// Fill what a material's model precomputes (the coat tables of Plastic and RoughPlastic;
+/// nothing for the others). Scene::finalize runs it for every material; a coated material that
+/// skipped it evaluates as black.
+void prepareMaterial(MaterialParams& m);
+
+/// The diffuse lobe alone, f(wo, wi) without the cosine: the whole BSDF of the diffuse models,
+/// a coated model's base under its coat (Plastic's delta coat and RoughPlastic's glossy coat
+/// left out), 0 for the others. Cones gather for this lobe; the coat is gathered apart.
+Vec3 bsdfEvalBase(const Material& m, const Vec3& wo, const Vec3& wi);
+
+/// Sample a coated model's coat alone (RoughPlastic: its microfacet reflection, by visible
+/// normals; Plastic: its delta reflection): weight = f_coat |cos| / pdf_coat. False for other
+/// materials and where the coat sends nothing.
+bool coatSample(const Material& m, const Vec3& wo, const Vec2& u, BsdfSample& out);
+
+/// The diffuse reflectance light leaves with, for the photons' field (view-independent): the
+/// albedo for the diffuse models; for the coated ones the base's reflectance through the coat,
+/// averaged over cosine-weighted directions in and out; 0 otherwise.
+Vec3 diffuseReflectance(const Material& m);
 
 }  // namespace voxcone

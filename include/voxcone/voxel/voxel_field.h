@@ -137,7 +137,7 @@ public:
   /// Voxelize the scene's surfaces at settings.level: only voxels a triangle passes through
   /// are active (triangle-box overlap, Akenine-Möller 2001); per voxel the surface area inside
   /// it, the area-weighted normal and the diffuse part of that area (mirrors, metals and glossy
-  /// surfaces get opacity but gather no light; photons bring the albedo, Photon::albedo). Smooth glass (MaterialType::Dielectric) is left out: a
+  /// surfaces get opacity but gather no light; photons bring the albedo, Photon::albedo). Smooth glass (Material::isClearGlass: Dielectric, ThinDielectric) is left out: a
   /// cone's lookups see through it to what it passes on, unbent, and its exact axis ray
   /// refracts through it (ConeTracer); as a black occluder it cost the glass dragon 0.7 dB at
   /// 4 spp. Throws SettingsError for bad settings (and a scene of glass alone: nothing to hold).

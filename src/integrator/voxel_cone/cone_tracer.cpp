@@ -60,7 +60,7 @@ std::optional<ConeTracer::AxisHit> ConeTracer::hitAlongAxis(const Vec3& p, const
 Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const {
   if (m_photons) {
     Vec3 L = m_photons->radiance(hit.surface, hit.side);
-    if (m_hitDirect && m_scene.materials[hit.surface.material].isDiffuse())
+    if (m_hitDirect && m_scene.materials[hit.surface.material].hasDiffuseBase())
       L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU);
     return L;
   }
@@ -133,7 +133,7 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
     if (!hit) return sky ? m_scene.escapedSky(d) : Vec3(0.0f);
     const Material& hm = m_scene.materials[hit->surface.material];
     if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
-    if (m_photons && !hm.isDiffuse()) return continueGlossy(hit->surface, d, lightU, depth);
+    if (m_photons && !hm.hasDiffuseBase()) return continueGlossy(hit->surface, d, lightU, depth);
     return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU);
   }
   // Exact visibility along the axis for the first segment (leak mitigation).

@@ -82,7 +82,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   OptionReader r(options, "voxcone");
   constexpr int kMaxInt = std::numeric_limits<int>::max();
   bool anyDelta = false;
-  for (const Material& m : scene.materials) anyDelta = anyDelta || m.isDelta();
+  for (const Material& m : scene.materials) anyDelta = anyDelta || m.hasDeltaLobe();
   out.maxDepth = render.maxDepth;
 
   out.fieldPath = r.text("field", "");

@@ -220,7 +220,7 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
     const Cone& cone = cones.cones()[i];
     const Vec3 d =
         geo.toWorld(Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
-    const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEval(mat, wo, frame.toLocal(d));
+    const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEvalBase(mat, wo, frame.toLocal(d));
     if (isBlack(f)) continue;
     Vec2 lightU((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
     lightU -= glm::floor(lightU);
@@ -262,7 +262,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   }
   if (m_settings.view == View::Full || m_settings.view == View::Direct)
     direct = estimateDirectLight(m_scene, m_accel, sh, woWorld, sampler, m_settings.lightSamples,
-                                 !(m_settings.skyByCones && mat.isDiffuse()));
+                                 !(m_settings.skyByCones && mat.hasDiffuseBase()));
   if (m_settings.view == View::Direct) return result();
   // Cones on the pixel's first `gathers` samples only, weighted to keep the pixel's mean.
   float gatherWeight = 1.0f;
@@ -276,7 +276,20 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   const Vec3 wo = frame.toLocal(woWorld);
   // A one-sided surface seen from behind: no caustics, no cones (its direct light is 0 too).
   if (mat.blackFrom(wo.z)) return result();
-  if (mat.isDiffuse()) {
+  if (mat.hasDiffuseBase()) {
+    // A rough coat's glossy reflection: one cone along a sampled direction of the coat alone,
+    // on every sample (as the glossy materials below); a smooth coat's is the delta chain's.
+    if (mat.type == MaterialType::RoughPlastic && m_settings.view != View::Caustic) {
+      BsdfSample bs;
+      const Vec2 uc = sampler.uniform2();
+      const Vec2 lightU = sampler.uniform2();
+      if (coatSample(mat, wo, uc, bs)) {
+        const Vec3 d = frame.toWorld(bs.wi);
+        const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
+        indirect += bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d,
+                                                std::max(mat.roughness, 0.01f), lightU, 0, m_settings.skyByCones);
+      }
+    }
     if (m_settings.view != View::Indirect) caustic = m_field.causticRadiance(sh.position, viewFrom(ng, m_causticVoxel));
     if (m_settings.view == View::Caustic) return result();
     if (split) {
@@ -296,7 +309,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
       split->gather = {sh, woWorld, u, gatherWeight};
       return result();
     }
-    indirect = gatherWeight * gatherDiffuse(sh, woWorld, u, depth > 0);
+    indirect += gatherWeight * gatherDiffuse(sh, woWorld, u, depth > 0);
     return result();
   }
   if (m_settings.view == View::Caustic) return result();
