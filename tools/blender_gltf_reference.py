@@ -2,24 +2,50 @@
 loading, textures and sky; run by Blender:
 
     blender -b --factory-startup -P tools/blender_gltf_reference.py -- SCENE.glb OUT.exr \
-        --sky R,G,B --spp N [--res N]
+        --sky R,G,B --spp N [--res N] [--byte-textures]
 
 Blender's own importer reads the file (its camera, meshes, embedded textures, emission). Its
 Principled BSDFs become Cycles' Diffuse BSDF of the same base colour (texture or factor), plus
 an Emission of the material's emission: glTF's metallic 0, roughness 1 is voxcone's Lambertian,
 and the Principled BSDF's specular layer and Disney diffuse would differ from it by a few
 percent. The world is a constant colour (the sky's radiance). Linear EXR, no denoising, no
-clamping, a box filter of one pixel, light tree and thresholds off."""
+clamping, a box filter of one pixel, light tree and thresholds off.
+
+8-bit sRGB textures are decoded to linear floats here (the sRGB formula, in numpy) before
+Cycles samples them: Cycles keeps byte images as bytes and interpolates them before decoding,
+which darkens every blend between texels (the room's lamp-lit walls came out 4% darker than
+with the decoded texels); glTF asks for decoding before filtering, as voxcone does. Pass
+--byte-textures to keep Cycles' own handling."""
 
 import sys
 
 import bpy
 
 
+def linearize_textures():
+    """Every 8-bit sRGB image replaced by a float image of its decoded (linear) values."""
+    import numpy as np
+    for img in list(bpy.data.images):
+        if img.source not in ("FILE", "GENERATED") and not img.packed_file:
+            continue
+        if img.is_float or img.colorspace_settings.name != "sRGB" or img.size[0] == 0:
+            continue
+        w, h = img.size
+        px = np.array(img.pixels[:], dtype=np.float64).reshape(-1, 4)
+        rgb = px[:, :3]
+        px[:, :3] = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+        lin = bpy.data.images.new(img.name + "-linear", w, h, alpha=True, float_buffer=True)
+        lin.colorspace_settings.name = "Linear"
+        lin.pixels[:] = px.ravel().tolist()
+        img.user_remap(lin)
+
+
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:]
     scene_path, out = argv[0], argv[1]
-    opts = dict(zip(argv[2::2], argv[3::2]))
+    flags = [a for a in argv[2:] if a == "--byte-textures"]
+    rest = [a for a in argv[2:] if a not in flags]
+    opts = dict(zip(rest[0::2], rest[1::2]))
     sky = [float(x) for x in opts.get("--sky", "0,0,0").split(",")]
     spp = int(opts.get("--spp", "256"))
     res = int(opts.get("--res", "256"))
@@ -30,6 +56,8 @@ def main():
     if not hasattr(numpy, "bool"):
         numpy.bool = bool
     bpy.ops.import_scene.gltf(filepath=scene_path)
+    if not flags:
+        linearize_textures()
     scn = bpy.context.scene
     cams = [o for o in scn.objects if o.type == "CAMERA"]
     if not cams:

@@ -154,7 +154,8 @@ def sky_room(rng):
     """A 5 x 2.7 x 4 m room (x, y, z) closed on every side but a window in its +z wall, in the
     open under a constant sky and a sun: a ground outside, walls 0.15 m thick. Everything the
     room receives comes through the window: sky light, the sun's patch on the floor, and the
-    ground's light."""
+    ground's light. Returns the scene and the same scene with the window walled up (nothing
+    reaches the room then: it must render black)."""
     w = 5.0 if rng is None else rng.uniform(3.5, 6.0)
     h = 2.7 if rng is None else rng.uniform(2.4, 3.2)
     d = 4.0 if rng is None else rng.uniform(3.0, 5.5)
@@ -195,7 +196,9 @@ def sky_room(rng):
     out = scene(cam, {"ground": {"type": "lambertian", "albedo": [0.3, 0.28, 0.22]}}, shapes, [0, 0, 0])
     del out["materials"]["light"]
     out["lights"] = lights
-    return out
+    closed = json.loads(json.dumps(out))
+    closed["shapes"] += box("window_shut", "white", [x0, sill, d], [x1, sill + win_h, d + t])
+    return out, closed
 
 
 def torus_knot(p=2, q=3, radius=1.0, tube=0.28, seg=160, ring=12):
@@ -305,7 +308,8 @@ def main():
     verts, quads, tris = cup()
     write_obj(os.path.join(mesh_dir, "cup.obj"), verts, quads, tris)
     scenes = {"two-rooms-door": two_rooms(rng, False), "two-rooms-closed": two_rooms(rng, True),
-              "sunlit-hall": sunlit_hall(rng), "small-objects": small_objects(rng, mesh_dir), "sky-room": sky_room(rng)}
+              "sunlit-hall": sunlit_hall(rng), "small-objects": small_objects(rng, mesh_dir)}
+    scenes["sky-room"], scenes["sky-room-closed"] = sky_room(rng)
     if args.variant:
         # Mesh paths relative to the output folder.
         for s in scenes.values():
