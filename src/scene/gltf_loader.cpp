@@ -368,12 +368,21 @@ private:
         m.distribution = MicrofacetDistribution::GGX;
         if (tex >= 0) warn(mw + ": its base colour texture tints the metal by its mean");
       } else {
-        if (metallic > 0.0) warn(mw + ": metallic " + std::to_string(metallic) + " rendered as 0 (a diffuse surface)");
-        if (roughness < 1.0)
-          warn(mw + ": its specular layer (roughness " + std::to_string(roughness) + ") is dropped: a Lambertian (no coated diffuse yet)");
-        m.type = MaterialType::Lambertian;
+        if (metallic > 0.0) warn(mw + ": metallic " + std::to_string(metallic) + " rendered as 0 (a dielectric)");
+        // glTF's dielectric BRDF is a Fresnel-weighted specular layer over the diffuse base:
+        // voxcone's coated diffuse of the same index (GGX, alpha = roughness^2). At roughness 1
+        // that layer is a faint haze over the whole hemisphere: a Lambertian, as Blender's
+        // Diffuse BSDF takes it.
         m.albedo = base;
         m.albedoTexture = tex;
+        if (roughness < 1.0) {
+          m.type = alpha >= 1e-4f ? MaterialType::RoughPlastic : MaterialType::Plastic;
+          m.ior = float(std::max(1.0001, numberIn(gm.extensions, "KHR_materials_ior", "ior", 1.5)));
+          m.roughness = std::max(alpha, 1e-4f);
+          m.distribution = MicrofacetDistribution::GGX;
+        } else {
+          m.type = MaterialType::Lambertian;
+        }
       }
       Vec3 emissive(0.0f);
       if (gm.emissiveFactor.size() >= 3)

@@ -315,12 +315,17 @@ TEST_F(Gltf, MaterialsMapAndWarnWhatTheyDrop) {
   EXPECT_EQ(matOf(1).type, MaterialType::RoughConductor);
   EXPECT_NEAR(matOf(1).roughness, 0.25f, 1e-6f);  // alpha = roughness^2
   EXPECT_NEAR(matOf(1).specular.y, 0.4f, 1e-6f);
-  EXPECT_EQ(matOf(2).type, MaterialType::Lambertian);  // a specular layer dropped, with a warning
+  // A non-metal of roughness < 1: its specular layer a rough coat of glTF's default index.
+  EXPECT_EQ(matOf(2).type, MaterialType::RoughPlastic);
+  EXPECT_NEAR(matOf(2).roughness, 0.09f, 1e-6f);
+  EXPECT_NEAR(matOf(2).ior, 1.5f, 1e-6f);
+  EXPECT_NEAR(matOf(2).albedo.z, 0.3f, 1e-6f);
+  EXPECT_GE(matOf(2).coat.internalReflectance, 0.0f);  // prepared by the loader's finalize
   EXPECT_EQ(matOf(3).type, MaterialType::RoughDielectric);
   EXPECT_NEAR(matOf(3).ior, 1.33f, 1e-6f);
   std::string all;
   for (const std::string& w : warnings) all += w + "\n";
-  EXPECT_NE(all.find("specular layer"), std::string::npos) << all;
+  EXPECT_EQ(all.find("specular layer"), std::string::npos) << all;
   EXPECT_NE(all.find("normal map"), std::string::npos) << all;
 }
 

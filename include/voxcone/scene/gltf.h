@@ -5,7 +5,8 @@
 /// What is read: the default scene's node tree (matrix or TRS transforms); triangle primitives
 /// (POSITION, NORMAL for smooth shading, TEXCOORD_0; indexed or not; a negative determinant flips
 /// the winding); pbrMetallicRoughness materials: baseColorFactor x baseColorTexture, metallic 0
-/// a Lambertian, metallic 1 a rough conductor tinted by the base colour (alpha = roughness^2,
+/// a coated diffuse (rough_plastic of KHR_materials_ior's index, alpha = roughness^2; a
+/// Lambertian at roughness 1), metallic 1 a rough conductor tinted by the base colour (alpha = roughness^2,
 /// a perfect reflector's Fresnel), KHR_materials_transmission (> 0) a dielectric of
 /// KHR_materials_ior's index (rough when roughness > 0), emissiveFactor x
 /// KHR_materials_emissive_strength as emitted radiance (both sides, as Blender's emission); the
@@ -16,7 +17,7 @@
 /// What voxcone cannot render as the file says is an error (spot lights, sparse accessors,
 /// texture coordinates other than TEXCOORD_0 for the base colour, points and lines) or a one-line
 /// warning naming what was dropped (metallic-roughness, normal, occlusion and emissive textures,
-/// a specular layer on a non-metal (no coated diffuse yet), alpha blending and masks, skins and
+/// alpha blending and masks, skins and
 /// morph targets, KHR_texture_transform); never silently different.
 /// glTF's texture coordinates put v = 0 at an image's top row; voxcone's at the bottom (v flips).
 
