@@ -18,9 +18,10 @@ nlohmann::json WhittedIntegrator::settingsJson() const {
   return {{"max_depth", m_maxDepth}, {"light_samples", m_lightSamples}};
 }
 
-Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u,
-                       bool withEnvironment) {
-  const LightSample ls = scene.sampleLight(hit.position, u, withEnvironment, &hit.shadingNormal);
+namespace {
+/// f cos L / pdf of light sample `ls` at `hit`, zero where a shadow ray finds it occluded.
+Vec3 shadeLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld,
+                      const LightSample& ls, float minDistance = 0.0f) {
   if (!(ls.pdf > 0.0f)) return Vec3(0.0f);
   const Frame frame(hit.shadingNormal);
   const Vec3 wi = frame.toLocal(ls.wi);
@@ -29,7 +30,19 @@ Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit&
   if (isBlack(f)) return Vec3(0.0f);
   if (accel.occluded(spawnRayTo(hit.position, hit.positionError, hit.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal)))
     return Vec3(0.0f);
-  return f * ls.radiance / ls.pdf;
+  const Vec3 L = f * ls.radiance / ls.pdf;
+  return ls.distance < minDistance ? L * sqr(ls.distance / minDistance) : L;
+}
+}  // namespace
+
+Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u,
+                       bool withEnvironment, float minDistance) {
+  return shadeLightSample(scene, accel, hit, woWorld, scene.sampleLight(hit.position, u, withEnvironment, &hit.shadingNormal),
+                          minDistance);
+}
+
+Vec3 environmentLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u) {
+  return shadeLightSample(scene, accel, hit, woWorld, scene.sampleEnvironment(hit.position, u, &hit.shadingNormal));
 }
 
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, Sampler& sampler,

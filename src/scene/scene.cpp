@@ -157,34 +157,8 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
   }
   const size_t delta = idx - m_emissiveTris.size();
   if (environment && idx + 1 == m_lightCdf.size()) {
-    // The environment: a direction from its own sampler, its lightPos beyond the bounding
-    // sphere as a directional light's.
-    float pdfDir = 0.0f;
-    Vec3 wi;
-    if (cosineAbout && environment->isConstant()) {
-      // Three quarters cosine-weighted, a quarter uniform (the constant's own sampler) so that
-      // directions below the surface (transmission) keep a density. Against cosine sampling
-      // alone (zero variance for an unshadowed diffuse point) a sample's weight is at most 4/3
-      // of it; the share is not tuned on a scene.
-      constexpr float kCosineShare = 0.75f;
-      if (u.x < kCosineShare) {
-        const Vec2 uc(std::min(u.x / kCosineShare, kOneMinusEpsilon), u.y);
-        wi = glm::normalize(Frame(*cosineAbout).toWorld(sampleCosineHemisphere(uc)));
-      } else {
-        const Vec2 ue(std::min((u.x - kCosineShare) / (1.0f - kCosineShare), kOneMinusEpsilon), u.y);
-        wi = environment->sample(ue, pdfDir);
-      }
-      pdfDir = (1.0f - kCosineShare) * environment->pdf(wi) + kCosineShare * cosineHemispherePdf(glm::dot(wi, *cosineAbout));
-    } else {
-      wi = environment->sample(u, pdfDir);
-    }
-    if (!(pdfDir > 0.0f)) return ls;
-    const Sphere s = boundingSphere();
-    ls.distance = 2.0f * (glm::length(ref - s.center) + s.radius) + 1.0f;
-    ls.wi = wi;
-    ls.radiance = environment->radiance(wi);
-    ls.lightPos = ref + wi * ls.distance;
-    ls.pdf = pmf * pdfDir;
+    ls = sampleEnvironment(ref, u, cosineAbout);
+    ls.pdf *= pmf;
     return ls;
   }
   if (delta >= pointLights.size()) {
@@ -217,6 +191,40 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
   ls.lightPos = pl.position;
   ls.pdf = pmf;
   ls.delta = true;
+  return ls;
+}
+
+LightSample Scene::sampleEnvironment(const Vec3& ref, const Vec2& u, const Vec3* cosineAbout) const {
+  // A direction from the environment's own sampler, its lightPos beyond the bounding sphere as
+  // a directional light's.
+  LightSample ls;
+  if (!environment) return ls;
+  float pdfDir = 0.0f;
+  Vec3 wi;
+  if (cosineAbout && environment->isConstant()) {
+    // Three quarters cosine-weighted, a quarter uniform (the constant's own sampler) so that
+    // directions below the surface (transmission) keep a density. Against cosine sampling
+    // alone (zero variance for an unshadowed diffuse point) a sample's weight is at most 4/3
+    // of it; the share is not tuned on a scene.
+    constexpr float kCosineShare = 0.75f;
+    if (u.x < kCosineShare) {
+      const Vec2 uc(std::min(u.x / kCosineShare, kOneMinusEpsilon), u.y);
+      wi = glm::normalize(Frame(*cosineAbout).toWorld(sampleCosineHemisphere(uc)));
+    } else {
+      const Vec2 ue(std::min((u.x - kCosineShare) / (1.0f - kCosineShare), kOneMinusEpsilon), u.y);
+      wi = environment->sample(ue, pdfDir);
+    }
+    pdfDir = (1.0f - kCosineShare) * environment->pdf(wi) + kCosineShare * cosineHemispherePdf(glm::dot(wi, *cosineAbout));
+  } else {
+    wi = environment->sample(u, pdfDir);
+  }
+  if (!(pdfDir > 0.0f)) return ls;
+  const Sphere s = boundingSphere();
+  ls.distance = 2.0f * (glm::length(ref - s.center) + s.radius) + 1.0f;
+  ls.wi = wi;
+  ls.radiance = environment->radiance(wi);
+  ls.lightPos = ref + wi * ls.distance;
+  ls.pdf = pdfDir;
   return ls;
 }
 

@@ -12,6 +12,7 @@
 #include "voxcone/core/sampling.h"
 #include "voxcone/image/image_io.h"
 #include "voxcone/image/metrics.h"
+#include "voxcone/integrator/whitted.h"
 #include "voxcone/photon/photon_tracer.h"
 #include "voxcone/scene/environment.h"
 #include "voxcone/scene/mitsuba.h"
@@ -287,6 +288,44 @@ Scene floorScene(const std::string& light) {
     "shapes": [{"type": "quad", "material": "floor", "vertices": [[-2, 0, -2], [-2, 0, 2], [2, 0, 2], [2, 0, -2]]}],
     "lights": [)" + light + "]}",
                     "floor-sky", ".");
+}
+
+TEST(Environment, TheSkysSampleAndTheLampsWithoutItAddUpToAllDirectLight) {
+  // The floor's centre (albedo 0.5, normal up) under a sky of radiance 1 and a point light of
+  // 2 W/sr one unit above: direct light 0.5 * 1 from the sky plus 0.5 / pi * 2 from the lamp.
+  // voxcone's cone hits take the two apart (ConeTracer::hitRadiance), so that choosing the sky
+  // by power does not starve the lamp of samples.
+  const Scene scene = floorScene(R"({"type": "environment", "radiance": 1},
+                                    {"type": "point", "position": [0, 1, 0], "intensity": 2})");
+  const Hbvh accel(scene);
+  Ray down;
+  down.origin = Vec3(0.0f, 2.0f, 0.0f);
+  down.dir = Vec3(0.0f, -1.0f, 0.0f);
+  SurfaceHit hit;
+  ASSERT_TRUE(intersectSurface(scene, accel, down, hit));
+  const Vec3 wo(0.0f, 1.0f, 0.0f);
+  Rng rng(3, 3);
+  DVec3 sky(0.0), lamp(0.0), both(0.0);
+  const int n = 20000;
+  for (int i = 0; i < n; ++i) {
+    const Vec2 u = rng.uniform2();
+    sky += DVec3(environmentLightSample(scene, accel, hit, wo, u));
+    lamp += DVec3(directLightSample(scene, accel, hit, wo, u, false));
+    both += DVec3(directLightSample(scene, accel, hit, wo, u));
+  }
+  EXPECT_NEAR(sky.x / n, 0.5, 0.005);
+  EXPECT_NEAR(lamp.x / n, 1.0 / 3.14159265358979, 1e-5);  // the one other light, every sample
+  EXPECT_NEAR(both.x / n, 0.5 + 1.0 / 3.14159265358979, 0.01);
+  // A light nearer than minDistance counts as that far: 1 / 2^2 of it at 2, unchanged at 0.5.
+  EXPECT_NEAR(directLightSample(scene, accel, hit, wo, Vec2(0.5f), false, 2.0f).x, 0.25 / 3.14159265358979, 1e-5);
+  EXPECT_NEAR(directLightSample(scene, accel, hit, wo, Vec2(0.5f), false, 0.5f).x, 1.0 / 3.14159265358979, 1e-5);
+  // The environment's sample is sampleLight's once it has chosen the sky, without the choice.
+  const Scene skyOnly = floorScene(R"({"type": "environment", "radiance": 1})");
+  const LightSample a = skyOnly.sampleLight(hit.position, Vec2(0.3f, 0.7f), true, &hit.shadingNormal);
+  const LightSample b = skyOnly.sampleEnvironment(hit.position, Vec2(0.3f, 0.7f), &hit.shadingNormal);
+  EXPECT_EQ(a.wi, b.wi);
+  EXPECT_FLOAT_EQ(a.pdf, b.pdf);  // the sky is the only light: its choice has probability 1
+  EXPECT_EQ(Scene().sampleEnvironment(Vec3(0.0f), Vec2(0.5f)).pdf, 0.0f);
 }
 
 TEST_F(EnvironmentFiles, PhotonsCarryPiLTimesTheFloorsArea) {

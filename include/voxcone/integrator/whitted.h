@@ -30,8 +30,14 @@ private:
 /// `withEnvironment` the environment is left out (Scene::sampleLight).
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Sampler& sampler,
                          int samples, bool withEnvironment = true);
-/// One sample of it: the light sampled at 2D point u, one shadow ray.
+/// One sample of it: the light sampled at 2D point u, one shadow ray. With `minDistance` > 0 a
+/// light point nearer than it counts as if it lay at that distance (its 1 / d^2 capped: the
+/// clamp of instant radiosity), for callers whose point stands for an area of that radius.
 Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, const Vec2& u,
-                       bool withEnvironment = true);
+                       bool withEnvironment = true, float minDistance = 0.0f);
+/// One sample of the environment's light alone (Scene::sampleEnvironment): with
+/// directLightSample(..., false) an estimate of all direct light in which the sky's choice does
+/// not starve the lamps (chosen by power, a sky seen through a window took most samples).
+Vec3 environmentLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, const Vec2& u);
 
 }  // namespace voxcone

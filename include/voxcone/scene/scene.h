@@ -170,6 +170,10 @@ public:
   /// escapedPdf is the pdf without it.
   LightSample sampleLight(const Vec3& ref, const Vec2& u, bool withEnvironment = true,
                           const Vec3* cosineAbout = nullptr) const;
+  /// The environment's own sample, as sampleLight draws it once it has chosen the environment
+  /// (`cosineAbout` likewise), its pdf the direction's alone (no choice among the lights); no
+  /// sample without an environment.
+  LightSample sampleEnvironment(const Vec3& ref, const Vec2& u, const Vec3* cosineAbout = nullptr) const;
   /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
   float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
   /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
