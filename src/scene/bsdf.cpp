@@ -190,7 +190,10 @@ bool roughDielectricSample(const Material& m, const Vec3& wo, float uc, const Ve
 // ---------------------------------------------------------------------------------------------
 // Rough conductor (Torrance-Sparrow with visible-normal sampling). wo, wi in the upper hemisphere.
 
-Vec3 roughConductorEval(const Material& m, const Vec3& wo, const Vec3& wi) {
+/// Torrance & Sparrow 1967 / Walter 2007, eq. 20: specular F(wo.wm) D G / (4 cos_o cos_i), the
+/// Fresnel term from `fresnel` (cosine -> reflectance per channel).
+template <typename Fresnel>
+Vec3 microfacetReflection(const Material& m, const Vec3& wo, const Vec3& wi, const Fresnel& fresnel) {
   Vec3 wm = wo + wi;
   const float len2 = glm::dot(wm, wm);
   if (!(len2 > 0.0f)) return Vec3(0.0f);
@@ -198,9 +201,12 @@ Vec3 roughConductorEval(const Material& m, const Vec3& wo, const Vec3& wi) {
   const float alpha = alphaOf(m);
   const float d = microfacet::distributionD(m.distribution, alpha, wm);
   const float g = microfacet::g2(m.distribution, alpha, wo, wi, false);
-  const Vec3 f = fresnelConductor(glm::dot(wo, wm), m.eta, m.k);
-  // Torrance & Sparrow 1967 / Walter 2007, eq. 20.
+  const Vec3 f = fresnel(glm::dot(wo, wm));
   return m.specular * f * (d * g / (4.0f * wo.z * wi.z));
+}
+
+Vec3 roughConductorEval(const Material& m, const Vec3& wo, const Vec3& wi) {
+  return microfacetReflection(m, wo, wi, [&](float c) { return fresnelConductor(c, m.eta, m.k); });
 }
 
 float roughConductorPdf(const Material& m, const Vec3& wo, const Vec3& wi) {
@@ -245,14 +251,7 @@ Vec3 coatedBaseEval(const Material& m, const Vec3& wo, const Vec3& wi) {
 }
 
 Vec3 roughCoatEval(const Material& m, const Vec3& wo, const Vec3& wi) {
-  Vec3 wm = wo + wi;
-  const float len2 = glm::dot(wm, wm);
-  if (!(len2 > 0.0f)) return Vec3(0.0f);
-  wm /= std::sqrt(len2);
-  const float alpha = alphaOf(m);
-  const float d = microfacet::distributionD(m.distribution, alpha, wm);
-  const float g = microfacet::g2(m.distribution, alpha, wo, wi, false);
-  return m.specular * (fresnelDielectric(glm::dot(wo, wm), m.ior) * d * g / (4.0f * wo.z * wi.z));
+  return microfacetReflection(m, wo, wi, [&](float c) { return Vec3(fresnelDielectric(c, m.ior)); });
 }
 
 /// The probability of sampling the coat for wo: its reflectance (F, or 1 - T for a rough coat)
