@@ -27,6 +27,12 @@ constexpr float kPlaneSlab = 0.25f;
 /// surface of radius R runs inside it beyond a distance of about 2 sqrt(2 R lift): at 1e-3 r a
 /// 4 cm cup saw its own photons only within 3 mm (r = 0.1 m); at 0.05 r within 2.5 cm.
 constexpr float kLift = 0.05f;
+/// Where the ray that measures a lift's room starts, in lifts off the surface: clear of the
+/// surface's own rounding (a photon's position carries no error bound).
+constexpr float kLiftProbeStart = 1e-3f;
+/// A point deeper behind x's tangent plane than this many lifts (1e-4 of the search radius,
+/// far above rounding) measures its lift's room (PhotonRadiance::lifted).
+constexpr float kBehindPlane = 2e-3f;
 /// Probes of the disc's own surface (coveredFraction): a Vogel spiral of this many points.
 constexpr int kAreaProbes = 8;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
@@ -101,6 +107,16 @@ size_t PhotonRadiance::memoryBytes() const {
          m_cache.size() * (sizeof(CacheEntry) + sizeof(CacheEstimate) + 1 + sizeof(Vec3) + sizeof(uint32_t) + 1);
 }
 
+Vec3 PhotonRadiance::lifted(const Vec3& p, const Vec3& n, const Vec3& x, const Vec3& side, float lift) const {
+  if (!(glm::dot(p - x, side) < -kBehindPlane * lift)) return p + n * lift;
+  Ray up;
+  up.origin = p + n * (kLiftProbeStart * lift);
+  up.dir = n;
+  up.tMax = lift;
+  const std::optional<Hit> h = m_accel->intersect(up);
+  return h ? p + n * (kLiftProbeStart * lift + 0.5f * h->t) : p + n * lift;
+}
+
 float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r,
                                       float lift) const {
   // Probes spread uniformly over the disc (Vogel's spiral: radius sqrt((i + 1/2) / n), golden
@@ -127,7 +143,7 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
     // In sight of the point, lifted off both surfaces as a photon there would be.
     Ray along;
     along.origin = from;
-    along.dir = under.position + n * lift - from;
+    along.dir = lifted(under.position, n, x, side, lift) - from;
     along.tMax = 1.0f - kShadowEpsilon;
     if (!m_accel->occluded(along)) ++covered;
   }
@@ -180,7 +196,7 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
     // In sight: nothing between the point and the photon, both lifted off their surfaces.
     Ray ray;
     ray.origin = from;
-    ray.dir = ph.position + ph.normal * lift - from;
+    ray.dir = lifted(ph.position, ph.normal, x, side, lift) - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
     sum += ph.power;
@@ -212,7 +228,7 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
     const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
     Ray ray;
     ray.origin = from;
-    ray.dir = c.position + c.normal * lift - from;
+    ray.dir = lifted(c.position, c.normal, x, side, lift) - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
     out = est.irradiance;

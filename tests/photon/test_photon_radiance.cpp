@@ -231,6 +231,57 @@ TEST(PhotonRadiance, APhotonInsideAWallDoesNotCountOnItsOtherFace) {
   }
 }
 
+TEST(PhotonRadiance, APhotonOnTheFarFaceOfAThinSlabDoesNotLightTheNearOne) {
+  // Found on held-out sky rooms (make_failure_scenes.py --variant 1 and 3: walls 1 cm thick) with
+  // the window walled up: photons that slipped into the 1 cm roof slab bounced inside it and lay
+  // on the inner side of its top face (y = h + t, normal -y), as the ceiling (y = h, seen from
+  // the room below, side -y) faces. Within the plane slab and turned the same way, they passed
+  // the filters, and each visibility segment ended at the photon lifted 0.05 r along its normal:
+  // 2-4 cm, through the 1 cm slab into the room, with nothing between. The room showed 0.06% of
+  // the open room's light where path gives exactly 0. A point behind the tangent plane is now
+  // lifted by at most half its way to the next surface.
+  const float h = 3.0f, t = 0.01f;
+  const std::string json = R"({
+    "camera": {"position": [0, 1, -3], "target": [0, 1, 0], "up": [0, 1, 0], "fov_y_deg": 40},
+    "materials": {"w": {"type": "lambertian", "albedo": 0.5}},
+    "shapes": [
+      {"type": "quad", "material": "w", "vertices": [[-2, H, -2], [2, H, -2], [2, H, 2], [-2, H, 2]]},
+      {"type": "quad", "material": "w", "vertices": [[-2, U, -2], [-2, U, 2], [2, U, 2], [2, U, -2]]}
+    ],
+    "lights": [{"type": "point", "position": [0, 1, 0], "intensity": 1}]})";
+  std::string text = json;
+  const auto put = [&text](char key, float value) {
+    for (size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, 1, std::to_string(value));
+  };
+  put('H', h);
+  put('U', h + t);
+  const Scene scene = parseScene(text, "slab", ".");
+  const auto accel = buildAccel("hbvh", scene);
+  PhotonMaps maps;
+  Rng rng(5, 0);
+  for (int i = 0; i < 256; ++i) {
+    Photon p;
+    p.position = Vec3(-0.5f + rng.uniform(), h + t, -0.5f + rng.uniform());
+    p.power = Vec3(1e-3f);
+    p.normal = Vec3(0, -1, 0);
+    p.incident = Vec3(0, -1, 0);
+    p.albedo = Vec3(0.5f);
+    p.bounces = 2;
+    maps.global.push_back(p);
+  }
+  // A search radius of 0.4 lifts by 2 cm, twice the slab.
+  for (int stride : {0, 8}) {
+    const PhotonRadiance est(scene, *accel, maps, {32, 0.4f, stride});
+    SurfaceHit ceiling;
+    ceiling.geomNormal = ceiling.shadingNormal = Vec3(0, -1, 0);
+    ceiling.material = scene.triMaterial[0];
+    for (float x : {0.0f, 0.2f, -0.3f}) {
+      ceiling.position = Vec3(x, h, 0.1f);
+      EXPECT_EQ(est.radiance(ceiling, Vec3(0, -1, 0)), Vec3(0.0f)) << "x " << x << ", stride " << stride;
+    }
+  }
+}
+
 TEST(PhotonRadiance, ThePhotonsOfAnotherSurfaceDoNotCount) {
   const Scene scene = wallScene(0.0055f);
   const auto accel = buildAccel("hbvh", scene);

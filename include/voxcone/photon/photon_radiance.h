@@ -87,6 +87,13 @@ private:
   /// passes the photons' filters: the surface under it, in sight of `from` (the hit lifted by
   /// `lift`). At least 1 / kAreaProbes.
   float coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r, float lift) const;
+  /// Surface point p (a photon's, a probe's) lifted along its unit normal n by `lift`, for a
+  /// segment from `from` above x (side `side`). When p lies behind x's tangent plane, by half
+  /// the way to the nearest surface along n instead, if that is nearer: a point on the inner
+  /// face of a wall thinner than the lift stays inside the wall (lifted through it, a photon
+  /// that slipped into a 1 cm roof slab through a seam lit the ceiling beneath it). Points on
+  /// x's plane or before it take no ray: lifting them crosses no surface x lies on.
+  Vec3 lifted(const Vec3& p, const Vec3& n, const Vec3& x, const Vec3& side, float lift) const;
   /// Incident irradiance (W / m^2 per channel) at surface point x (rounding error xError) on
   /// side `side`: the k nearest photons that pass the filters over the covered disc, whose
   /// radius goes to `radius`. With skipStride > 1 the photons whose index is a multiple of it
