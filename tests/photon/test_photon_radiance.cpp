@@ -11,12 +11,22 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <initializer_list>
+#include <string>
+#include <utility>
 
 namespace voxcone {
 namespace {
 
 /// A 4 x 4 floor (y = 0, two quads meeting at x = 0) and a wall of thickness `t` standing on it
 /// across x in [0, t], 1 high, wholly dividing the floor; Lambertian albedo 0.5.
+/// `text` with every one-letter placeholder of `values` replaced by its number.
+std::string substituted(std::string text, std::initializer_list<std::pair<char, float>> values) {
+  for (const auto& [key, value] : values)
+    for (size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, 1, std::to_string(value));
+  return text;
+}
+
 Scene wallScene(float t) {
   const std::string json = R"({
     "camera": {"position": [0, 2, -5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40},
@@ -197,14 +207,7 @@ TEST(PhotonRadiance, APhotonInsideAWallDoesNotCountOnItsOtherFace) {
       {"type": "quad", "material": "w", "vertices": [[0, 0, 0], [T, 0, 0], [T, 0, D], [0, 0, D]]}
     ],
     "lights": [{"type": "point", "position": [2, 2, 2], "intensity": 1}]})";
-  std::string text = json;
-  const auto put = [&text](char key, float value) {
-    for (size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, 1, std::to_string(value));
-  };
-  put('T', t);
-  put('H', height);
-  put('D', depth);
-  const Scene scene = parseScene(text, "wall", ".");
+  const Scene scene = parseScene(substituted(json, {{'T', t}, {'H', height}, {'D', depth}}), "wall", ".");
   const auto accel = buildAccel("hbvh", scene);
   // The two photons the estimate counted there, and 62 more around them on the same face.
   PhotonMaps maps;
@@ -249,13 +252,7 @@ TEST(PhotonRadiance, APhotonOnTheFarFaceOfAThinSlabDoesNotLightTheNearOne) {
       {"type": "quad", "material": "w", "vertices": [[-2, U, -2], [-2, U, 2], [2, U, 2], [2, U, -2]]}
     ],
     "lights": [{"type": "point", "position": [0, 1, 0], "intensity": 1}]})";
-  std::string text = json;
-  const auto put = [&text](char key, float value) {
-    for (size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, 1, std::to_string(value));
-  };
-  put('H', h);
-  put('U', h + t);
-  const Scene scene = parseScene(text, "slab", ".");
+  const Scene scene = parseScene(substituted(json, {{'H', h}, {'U', h + t}}), "slab", ".");
   const auto accel = buildAccel("hbvh", scene);
   PhotonMaps maps;
   Rng rng(5, 0);

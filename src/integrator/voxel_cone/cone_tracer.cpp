@@ -77,6 +77,8 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
       // at 0.5 v 2% darker).
       L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU, false, kHitLightClamp * v);
       if (m_scene.environment) {
+        // The sky's pair: the lamps' shifted by irrational steps (a Cranley-Patterson rotation),
+        // so the two samples of one hit do not share their point.
         const Vec2 skyU(std::fmod(lightU.x + 0.61803399f, 1.0f), std::fmod(lightU.y + 0.41421356f, 1.0f));
         L += environmentLightSample(m_scene, m_accel, hit.surface, -d, skyU);
       }

@@ -281,9 +281,9 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
     // on every sample (as the glossy materials below); a smooth coat's is the delta chain's.
     if (mat.type == MaterialType::RoughPlastic && m_settings.view != View::Caustic) {
       BsdfSample bs;
-      const Vec2 uc = sampler.uniform2();
+      const Vec2 u = sampler.uniform2();
       const Vec2 lightU = sampler.uniform2();
-      if (coatSample(mat, wo, uc, bs)) {
+      if (coatSample(mat, wo, u, bs)) {
         const Vec3 d = frame.toWorld(bs.wi);
         const Vec3 side = glm::dot(d, sh.geomNormal) >= 0.0f ? sh.geomNormal : -sh.geomNormal;
         indirect += bs.weight * m_tracer->trace(sh.position, sh.positionError, side, d,
