@@ -14,6 +14,11 @@ defaults (metres, +y up, 256x256, 16 spp, the project's JSON format):
                     2% of the room) on a table, seen from 0.6 m
   sky-room          a closed room with 0.15 m walls in the open, lit only through one window by
                     a constant sky and a sun (a directional light), a ground outside
+  many-lights       a closed room lit only by 16 small lights (45 mm) of different colours and
+                    powers: on the ceiling, hanging, on three walls; four boxes on the floor
+  glossy-room       a Cornell-like room whose back wall is rough aluminium (GGX alpha 0.25), whose
+                    floor is a black polished rough dielectric (alpha 0.2), with a mirror ball and
+                    an Oren-Nayar block
 
 --variant N (N > 0) writes scenes of the same kinds with other dimensions, wall thickness,
 light and camera placements, drawn from N (for checks on scenes the defaults were not tuned on;
@@ -201,6 +206,95 @@ def sky_room(rng):
     return out, closed
 
 
+LIGHT_COLOURS = [[1.0, 0.35, 0.2], [0.3, 1.0, 0.35], [0.3, 0.45, 1.0], [1.0, 0.85, 0.4], [0.9, 0.3, 1.0],
+                 [0.3, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 0.6, 0.2]]
+
+
+def many_lights(rng):
+    """A closed 6 x 2.8 x 5 m room (x, y, z) lit only by 16 small lights, 45 mm squares of
+    different colours and powers: six on the ceiling facing down, four hanging as small glowing
+    cubes, two on each of three walls facing into the room; four boxes on the floor."""
+    w = 6.0 if rng is None else rng.uniform(4.5, 8.0)
+    h = 2.8 if rng is None else rng.uniform(2.5, 3.4)
+    d = 5.0 if rng is None else rng.uniform(4.0, 7.0)
+    r = random.Random(7) if rng is None else rng
+    s = 0.045 if rng is None else rng.uniform(0.03, 0.06)
+    n_ceiling, n_hanging, n_wall = (6, 4, 2) if rng is None else (rng.randint(4, 8), rng.randint(2, 5), rng.randint(1, 3))
+    shapes = room("room", [0, 0, 0], [w, h, d], {"xm": "red", "xp": "blue"})
+    mats = {}
+    count = [0]
+
+    def light_material(scale):
+        c = r.choice(LIGHT_COLOURS)
+        name = "lamp%d" % count[0]
+        count[0] += 1
+        mats[name] = {"type": "lambertian", "albedo": [0, 0, 0], "emission": [round(v * scale, 3) for v in c]}
+        return name
+
+    for i in range(n_ceiling):
+        cx, cz = r.uniform(0.15, 0.85) * w, r.uniform(0.15, 0.85) * d
+        q = ceiling_light("ceiling%d" % i, (cx, cz), s, h - 0.001)
+        q["material"] = light_material(r.uniform(300, 900))
+        shapes.append(q)
+    for i in range(n_hanging):
+        cx, cy, cz = r.uniform(0.2, 0.8) * w, r.uniform(1.2, h - 0.6), r.uniform(0.2, 0.8) * d
+        shapes += box("hanging%d" % i, light_material(r.uniform(100, 300)), [cx - s / 2, cy - s / 2, cz - s / 2],
+                      [cx + s / 2, cy + s / 2, cz + s / 2])
+    # Wall lights: on the -x, +x and -z walls, 1 mm off the wall, facing into the room.
+    for wall in ("xm", "xp", "zm"):
+        for i in range(n_wall):
+            y = r.uniform(0.8, h - 0.5)
+            m = light_material(r.uniform(300, 900))
+            hs = s / 2
+            if wall == "zm":
+                x = r.uniform(0.2, 0.8) * w
+                v = [[x - hs, y - hs, 0.001], [x + hs, y - hs, 0.001], [x + hs, y + hs, 0.001], [x - hs, y + hs, 0.001]]
+            else:
+                z = r.uniform(0.2, 0.8) * d
+                x = 0.001 if wall == "xm" else w - 0.001
+                v = [[x, y - hs, z - hs], [x, y + hs, z - hs], [x, y + hs, z + hs], [x, y - hs, z + hs]]
+                if wall == "xp":
+                    v = v[::-1]
+            shapes.append(quad("wall_%s%d" % (wall, i), m, v))
+    for i in range(4):
+        bw, bh = r.uniform(0.3, 0.7), r.uniform(0.3, 1.1)
+        bx, bz = r.uniform(0.15, 0.85) * w, r.uniform(0.3, 0.8) * d
+        shapes += box("box%d" % i, r.choice(["white", "green", "white"]), [bx - bw / 2, 0, bz - bw / 2],
+                      [bx + bw / 2, bh, bz + bw / 2])
+    cam = {"position": [0.5 * w, 1.6, d - 0.2], "target": [0.5 * w, 1.0, 0.0], "up": [0, 1, 0], "fov_y_deg": 70}
+    out = scene(cam, mats, shapes, [0, 0, 0])
+    del out["materials"]["light"]
+    return out
+
+
+def glossy_room(rng):
+    """A 2 m Cornell-like room (red and green side walls, a white ceiling with a light): its back
+    wall rough aluminium, its floor a black polished floor (a rough dielectric with nothing
+    under it), a mirror ball and an Oren-Nayar block on the floor."""
+    size = 2.0 if rng is None else rng.uniform(1.6, 3.0)
+    a_wall = 0.25 if rng is None else rng.uniform(0.12, 0.4)
+    a_floor = 0.2 if rng is None else rng.uniform(0.08, 0.35)
+    shapes = room("room", [-size / 2, 0, -size / 2], [size / 2, size, size / 2],
+                  {"xm": "red", "xp": "green", "zm": "metal", "ym": "floor"}, skip=("zp",))
+    ball_r = 0.2 * size if rng is None else rng.uniform(0.15, 0.25) * size
+    bx = -0.2 * size if rng is None else rng.uniform(-0.3, 0.0) * size
+    shapes.append({"type": "sphere", "name": "ball", "material": "mirror", "center": [bx, ball_r, -0.1 * size],
+                   "radius": ball_r, "subdivisions": 5})
+    b = 0.25 * size
+    cx = 0.22 * size if rng is None else rng.uniform(0.1, 0.3) * size
+    cz = 0.1 * size if rng is None else rng.uniform(-0.1, 0.25) * size
+    shapes += box("block", "clay", [cx - b / 2, 0, cz - b / 2], [cx + b / 2, 1.6 * b, cz + b / 2])
+    shapes.append(ceiling_light("light", (0.0, 0.0), 0.25 * size, size - 0.001))
+    mats = {"metal": {"type": "rough_conductor", "eta": [1.657, 0.880, 0.521], "k": [9.224, 6.270, 4.837],
+                      "roughness": round(a_wall, 3), "distribution": "ggx"},
+            "floor": {"type": "rough_dielectric", "ior": 1.5, "roughness": round(a_floor, 3), "distribution": "ggx"},
+            "mirror": {"type": "mirror"},
+            "clay": {"type": "oren_nayar", "albedo": [0.7, 0.55, 0.4], "sigma_deg": 25}}
+    cam = {"position": [0.0, 0.5 * size, 1.9 * size], "target": [0.0, 0.45 * size, 0.0], "up": [0, 1, 0],
+           "fov_y_deg": 40}
+    return scene(cam, mats, shapes, [17, 12, 4])
+
+
 def torus_knot(p=2, q=3, radius=1.0, tube=0.28, seg=160, ring=12):
     """A (p, q) torus knot tube: vertices and quads (wound outwards)."""
     def curve(s):
@@ -310,6 +404,8 @@ def main():
     scenes = {"two-rooms-door": two_rooms(rng, False), "two-rooms-closed": two_rooms(rng, True),
               "sunlit-hall": sunlit_hall(rng), "small-objects": small_objects(rng, mesh_dir)}
     scenes["sky-room"], scenes["sky-room-closed"] = sky_room(rng)
+    scenes["many-lights"] = many_lights(rng)
+    scenes["glossy-room"] = glossy_room(rng)
     if args.variant:
         # Mesh paths relative to the output folder.
         for s in scenes.values():

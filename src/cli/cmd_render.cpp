@@ -42,6 +42,7 @@ struct RenderOptions {
   std::string integratorOptions = "{}";
   std::string accel = "hbvh";
   std::string sampler;
+  std::string lightSampler;       // --light-sampler: tree or power
   double targetError = 0.0;
   double timeBudget = 0.0;
   std::string field;              // --field: a .vdb to render with (voxcone)
@@ -87,7 +88,7 @@ void runRender(const RenderOptions& o) {
       o.scenePath.empty() ? std::string(kDefaultSceneName) : std::filesystem::path(o.scenePath).stem().string();
   if (o.scenePath.empty() && !o.defines.empty())
     throw SettingsError("-D sets parameters of a Mitsuba XML scene; none is given");
-  const Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
+  Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
                                           : loadScene(o.scenePath, parseDefines(o.defines));
   const double loadSec = t.seconds();
   // What the image was made from, hashed as it was read (xxhsum -H2 checks a file against it).
@@ -117,6 +118,7 @@ void runRender(const RenderOptions& o) {
   if (o.seed) settings.seed = *o.seed;
   if (o.maxDepth != 0) settings.maxDepth = o.maxDepth;
   if (!o.sampler.empty()) settings.sampler = samplerKindFromName(o.sampler);
+  if (!o.lightSampler.empty()) scene.setLightTree(settings.lightTree = o.lightSampler == "tree");
   settings.validate();
   AovRequest aovs;
   if (!o.aovs.empty()) {
@@ -226,7 +228,8 @@ void runRender(const RenderOptions& o) {
   meta["method"] = settings.method;
   meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
                       {"max_depth", settings.maxDepth}, {"seed", settings.seed},
-                      {"sampler", samplerNames()[size_t(settings.sampler)]}, {"threads", threads.threads()},
+                      {"sampler", samplerNames()[size_t(settings.sampler)]},
+                      {"light_sampler", settings.lightTree ? "tree" : "power"}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
   if (!result.layers.empty()) {
@@ -326,6 +329,10 @@ void addRenderCommand(CLI::App& app) {
   cmd->add_option("--sampler", o->sampler, "Pixel sampler: sobol (Owen-scrambled) or independent")
       ->check(CLI::IsMember(samplerNames()))
       ->default_str("the scene's, else sobol");
+  cmd->add_option("--light-sampler", o->lightSampler,
+                  "How a shading point chooses among the bounded lights: tree (by estimated contribution) or power")
+      ->check(CLI::IsMember({"tree", "power"}))
+      ->default_str("the scene's, else tree");
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024))->default_str("the scene's");
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");

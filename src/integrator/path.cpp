@@ -39,6 +39,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
   bool specularBounce = true;  // the camera vertex acts as a delta
   float prevPdf = 0.0f;        // solid-angle pdf of the BSDF sample that made `ray`
   Vec3 prevPos(0.0f);
+  Vec3 prevNormal(0.0f, 0.0f, 1.0f);  // its shading normal (the light tree's bound)
   float etaScale = 1.0f;       // removes radiance's 1/eta^2 from the roulette weight
 
   for (int depth = 0;; ++depth) {
@@ -64,7 +65,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
       if (specularBounce || !m_nee) {
         c = beta * Le;
       } else {
-        const float lightPdf = m_scene.lightPdf(prevPos, sh.triangle, pos, sh.geomNormal);
+        const float lightPdf = m_scene.lightPdf(prevPos, &prevNormal, sh.triangle, pos, sh.geomNormal);
         c = beta * Le * powerHeuristic(prevPdf, lightPdf);
       }
       L += c;
@@ -79,7 +80,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
 
     // Next-event estimation: one light sample, MIS-weighted against BSDF sampling.
     if (m_nee && !mat.isDelta()) {
-      const LightSample ls = m_scene.sampleLight(pos, sampler.uniform2());
+      const LightSample ls = m_scene.sampleLight(pos, sampler.uniform2(), true, nullptr, &sh.shadingNormal);
       if (ls.pdf > 0.0f) {
         const Vec3 wi = frame.toLocal(ls.wi);
         const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
@@ -107,6 +108,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
     specularBounce = bs.delta;
     prevPdf = bs.pdf;
     prevPos = pos;
+    prevNormal = sh.shadingNormal;
     if (bs.transmission) etaScale *= sqr(bs.eta);
     const Vec3 wiWorld = frame.toWorld(bs.wi);
     ray = spawnRay(pos, sh.positionError, sh.geomNormal, wiWorld);

@@ -27,12 +27,13 @@ void Scene::finalize() {
   m_bounds = Bounds3();
   for (const Vec3& p : positions) m_bounds.extend(p);
 
-  // Lights: emissive triangles then point lights, chosen in proportion to emitted power.
+  // Lights: emissive triangles then point lights (the bounded lights, in the light tree), then
+  // directional lights and the environment.
   m_emissiveTris.clear();
   m_emissiveArea.clear();
   m_emissiveNormal.clear();
   m_triLightIndex.assign(triangles.size(), -1);
-  std::vector<float> power;
+  std::vector<LightBounds> bounded;
   for (uint32_t t = 0; t < triangles.size(); ++t) {
     const Material& m = materials[triMaterial[t]];
     if (!m.isEmissive()) continue;
@@ -43,34 +44,64 @@ void Scene::finalize() {
     if (!(flux > 0.0f)) continue;
     m_triLightIndex[t] = static_cast<int32_t>(m_emissiveTris.size());
     m_emissiveTris.push_back(t);
-    // The same arithmetic sampleLight used per sample (so its results are unchanged).
     const UVec3& tri = triangles[t];
     const Vec3 cr = glm::cross(positions[tri.y] - positions[tri.x], positions[tri.z] - positions[tri.x]);
     m_emissiveArea.push_back(area);
     m_emissiveNormal.push_back(cr / (2.0f * area));
-    power.push_back(flux);
+    LightBounds lb;
+    lb.bounds = Bounds3(positions[tri.x], positions[tri.y]);
+    lb.bounds.extend(positions[tri.z]);
+    lb.w = m_emissiveNormal.back();
+    lb.phi = flux;
+    lb.twoSided = m.twoSidedEmission;
+    bounded.push_back(lb);
   }
-  for (const PointLight& pl : pointLights) power.push_back(4.0f * kPi * std::max(0.0f, luminance(pl.intensity)));
-  // A directional light: the flux through the bounding sphere's cross-section.
+  for (const PointLight& pl : pointLights) {
+    LightBounds lb;
+    lb.bounds = Bounds3(pl.position, pl.position);
+    lb.phi = 4.0f * kPi * std::max(0.0f, luminance(pl.intensity));
+    lb.cosTheta_o = -1.0f;  // every direction
+    bounded.push_back(lb);
+  }
+  // The bounded lights by power alone (render.lightTree false) and by the tree.
+  double boundedTotal = 0.0;
+  for (const LightBounds& lb : bounded) boundedTotal += lb.phi;
+  m_boundedCdf.resize(bounded.size());
+  m_boundedPmf.resize(bounded.size());
+  double acc = 0.0;
+  for (size_t i = 0; i < bounded.size(); ++i) {
+    acc += bounded[i].phi;
+    m_boundedPmf[i] = boundedTotal > 0.0 ? static_cast<float>(bounded[i].phi / boundedTotal) : 0.0f;
+    m_boundedCdf[i] = boundedTotal > 0.0 ? static_cast<float>(acc / boundedTotal) : 0.0f;
+  }
+  if (!m_boundedCdf.empty()) m_boundedCdf.back() = 1.0f;
+  m_tree = LightTree(bounded);
+
+  // The groups: the bounded lights together, each directional light (the flux through the
+  // bounding sphere's cross-section) and the environment (the flux through a disc of radius R
+  // facing each direction, pi R^2 times the radiance's integral over the sphere, pbrt-v4's
+  // ImageInfiniteLight::Phi).
+  std::vector<double> power;
+  m_hasBounded = !bounded.empty();
+  if (m_hasBounded) power.push_back(boundedTotal);
   const float radius = boundingSphere().radius;
   for (const DirectionalLight& dl : directionalLights)
     power.push_back(kPi * radius * radius * std::max(0.0f, luminance(dl.irradiance)));
-  // The environment: the flux through a disc of radius R facing each direction, pi R^2 times
-  // the radiance's integral over the sphere (pbrt-v4's ImageInfiniteLight::Phi).
   if (environment) power.push_back(kPi * radius * radius * std::max(0.0f, luminance(environment->integral())));
+  m_lightCount = bounded.size() + directionalLights.size() + (environment ? 1 : 0);
 
   double total = 0.0;
-  for (float p : power) total += p;
+  for (double p : power) total += p;
   m_totalPower = static_cast<float>(total);
-  m_lightCdf.resize(power.size());
-  m_lightPmf.resize(power.size());
-  double acc = 0.0;
+  m_groupCdf.resize(power.size());
+  m_groupPmf.resize(power.size());
+  acc = 0.0;
   for (size_t i = 0; i < power.size(); ++i) {
     acc += power[i];
-    m_lightPmf[i] = total > 0.0 ? static_cast<float>(power[i] / total) : 0.0f;
-    m_lightCdf[i] = total > 0.0 ? static_cast<float>(acc / total) : 0.0f;
+    m_groupPmf[i] = total > 0.0 ? static_cast<float>(power[i] / total) : 0.0f;
+    m_groupCdf[i] = total > 0.0 ? static_cast<float>(acc / total) : 0.0f;
   }
-  if (!m_lightCdf.empty()) m_lightCdf.back() = 1.0f;
+  if (!m_groupCdf.empty()) m_groupCdf.back() = 1.0f;
 }
 
 Sphere Scene::boundingSphere() const {
@@ -111,24 +142,46 @@ Vec3 Scene::emitted(const SurfaceHit& hit, const Vec3& w) const {
   return Vec3(0.0f);
 }
 
-LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout) const {
+LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout,
+                               const Vec3* normal) const {
   LightSample ls;
-  if (m_lightCdf.empty()) return ls;
-  // Choose a light by power (binary search in the CDF), then reuse u.x within its interval.
-  // Without the environment (the last light) u.x is squeezed below its interval and the
+  if (m_groupCdf.empty()) return ls;
+  // Choose a group by power (binary search in the CDF), then reuse u.x within its interval.
+  // Without the environment (the last group) u.x is squeezed below its interval and the
   // choice's probability renormalized.
   const bool dropEnvironment = environment && !withEnvironment;
-  const size_t count = m_lightCdf.size() - (dropEnvironment ? 1 : 0);
-  const float share = dropEnvironment ? (count == 0 ? 0.0f : m_lightCdf[count - 1]) : 1.0f;
+  const size_t count = m_groupCdf.size() - (dropEnvironment ? 1 : 0);
+  const float share = dropEnvironment ? (count == 0 ? 0.0f : m_groupCdf[count - 1]) : 1.0f;
   if (!(share > 0.0f)) return ls;
   const float uc = std::min(uChoice.x * share, share * kOneMinusEpsilon);
-  const size_t idx = std::min(static_cast<size_t>(std::upper_bound(m_lightCdf.begin(), m_lightCdf.begin() + long(count), uc) -
-                                                  m_lightCdf.begin()),
-                              count - 1);
-  const float pmf = m_lightPmf[idx] / share;
+  const size_t group = std::min(
+      static_cast<size_t>(std::upper_bound(m_groupCdf.begin(), m_groupCdf.begin() + long(count), uc) - m_groupCdf.begin()),
+      count - 1);
+  float pmf = m_groupPmf[group] / share;
   if (!(pmf > 0.0f)) return ls;
-  const float cdfBelow = idx == 0 ? 0.0f : m_lightCdf[idx - 1];
-  const Vec2 u(std::clamp((uc - cdfBelow) / m_lightPmf[idx], 0.0f, kOneMinusEpsilon), uChoice.y);
+  const float cdfBelow = group == 0 ? 0.0f : m_groupCdf[group - 1];
+  float ux = std::clamp((uc - cdfBelow) / m_groupPmf[group], 0.0f, kOneMinusEpsilon);
+  size_t idx;  // the light, in lightCount()'s order
+  if (m_hasBounded && group == 0) {
+    if (render.lightTree) {
+      uint32_t light = 0;
+      float treePmf = 0.0f;
+      if (!m_tree.sample(ref, normal, ux, light, treePmf)) return ls;
+      idx = light;
+      pmf *= treePmf;
+    } else {
+      idx = std::min(static_cast<size_t>(std::upper_bound(m_boundedCdf.begin(), m_boundedCdf.end(), ux) - m_boundedCdf.begin()),
+                     m_boundedCdf.size() - 1);
+      const float below = idx == 0 ? 0.0f : m_boundedCdf[idx - 1];
+      if (!(m_boundedPmf[idx] > 0.0f)) return ls;
+      ux = std::clamp((ux - below) / m_boundedPmf[idx], 0.0f, kOneMinusEpsilon);
+      pmf *= m_boundedPmf[idx];
+    }
+  } else {
+    idx = m_boundedPmf.size() + group - (m_hasBounded ? 1 : 0);
+  }
+  if (!(pmf > 0.0f)) return ls;
+  const Vec2 u(ux, uChoice.y);
   if (idx < m_emissiveTris.size()) {
     // Uniform point on the emissive triangle, converted to a solid-angle density at ref.
     const uint32_t t = m_emissiveTris[idx];
@@ -156,7 +209,7 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
     return ls;
   }
   const size_t delta = idx - m_emissiveTris.size();
-  if (environment && idx + 1 == m_lightCdf.size()) {
+  if (environment && idx + 1 == m_lightCount) {
     ls = sampleEnvironment(ref, u, cosineAbout);
     ls.pdf *= pmf;
     return ls;
@@ -237,15 +290,23 @@ Vec3 Scene::escaped(const Vec3& dir) const {
 
 Vec3 Scene::escapedMis(const Vec3& dir, float bsdfPdf) const {
   Vec3 L = environment ? environment->radiance(dir) * powerHeuristic(bsdfPdf, escapedPdf(dir)) : Vec3(0.0f);
-  const size_t first = m_emissiveTris.size() + pointLights.size();
+  const size_t first = m_hasBounded ? 1 : 0;
   for (size_t i = 0; i < directionalLights.size(); ++i) {
     const DirectionalLight& dl = directionalLights[i];
-    if (dl.seenAlong(dir)) L += dl.radiance() * powerHeuristic(bsdfPdf, m_lightPmf[first + i] / dl.solidAngle());
+    if (dl.seenAlong(dir)) L += dl.radiance() * powerHeuristic(bsdfPdf, m_groupPmf[first + i] / dl.solidAngle());
   }
   return L;
 }
 
-float Scene::lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const {
+float Scene::lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) const {
+  if (light >= m_lightCount) return 0.0f;
+  const size_t bounded = m_boundedPmf.size();
+  if (light >= bounded) return m_groupPmf[light - bounded + (m_hasBounded ? 1 : 0)];
+  return m_groupPmf[0] * (render.lightTree ? m_tree.pmf(ref, normal, uint32_t(light)) : m_boundedPmf[light]);
+}
+
+float Scene::lightPdf(const Vec3& ref, const Vec3* normal, uint32_t triangle, const Vec3& lightPos,
+                      const Vec3& lightNormal) const {
   if (m_triLightIndex.empty()) return 0.0f;
   const int32_t li = m_triLightIndex[triangle];
   if (li < 0) return 0.0f;
@@ -253,7 +314,7 @@ float Scene::lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, 
   const float dist2 = glm::dot(d, d);
   const float cosL = std::fabs(glm::dot(lightNormal, d)) / std::sqrt(dist2);
   if (!(cosL > 0.0f)) return 0.0f;
-  return m_lightPmf[static_cast<size_t>(li)] * dist2 / (cosL * triangleArea(triangle));
+  return lightChoicePmf(ref, normal, static_cast<size_t>(li)) * dist2 / (cosL * triangleArea(triangle));
 }
 
 nlohmann::json Scene::statsJson() const {

@@ -337,6 +337,9 @@ private:
     } catch (const SettingsError& e) {
       r.fail(e.what(), "sampler");
     }
+    const std::string lightSampler = r.string("light_sampler", s.lightTree ? "tree" : "power");
+    if (lightSampler != "tree" && lightSampler != "power") r.fail("must be \"tree\" or \"power\", got \"" + lightSampler + "\"", "light_sampler");
+    s.lightTree = lightSampler == "tree";
     s.photons = static_cast<uint64_t>(r.integer("photons", static_cast<int64_t>(s.photons), 0, int64_t(1) << 36));
     s.causticPhotons =
         static_cast<uint64_t>(r.integer("caustic_photons", static_cast<int64_t>(s.causticPhotons), 0, int64_t(1) << 36));

@@ -8,6 +8,7 @@
 #include "voxcone/core/sampler.h"
 #include "voxcone/scene/camera.h"
 #include "voxcone/scene/environment.h"
+#include "voxcone/scene/light_tree.h"
 #include "voxcone/scene/material.h"
 #include "voxcone/scene/texture.h"
 
@@ -65,6 +66,9 @@ struct RenderSettings {
   /// Photons emitted for the caustic map, when caustics are possible; 0: the method's default
   /// (voxcone kVoxconeDefaultCausticPhotons, pm a fifth of the global map's).
   uint64_t causticPhotons = 0;
+  /// How lights are chosen for a shading point: by a light tree (their estimated contribution
+  /// there, the default) or in proportion to their power alone ("power", for comparisons).
+  bool lightTree = true;
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };
@@ -152,30 +156,46 @@ public:
   Vec3 emitted(const SurfaceHit& hit, const Vec3& w) const;
 
   // Lights. Every emissive triangle, point light and directional light, and the environment,
-  // is one light; one is chosen in proportion to its power (luminance of emitted flux; the
-  // environment's pi R^2 times its radiance's integral over the sphere, R the bounding sphere's).
-  size_t lightCount() const { return m_lightCdf.size(); }
-  bool hasLights() const { return !m_lightCdf.empty(); }
+  // is one light. The lights at infinity (directional, environment) are chosen in proportion to
+  // their power (luminance of emitted flux; the environment's pi R^2 times its radiance's
+  // integral over the sphere, R the bounding sphere's), and so is the set of bounded lights
+  // (emissive triangles, point lights) as a whole; within that set a light tree (light_tree.h)
+  // chooses one by its estimated contribution at the shading point, or, with
+  // render.lightTree false, again in proportion to power.
+  size_t lightCount() const { return m_lightCount; }
+  bool hasLights() const { return m_lightCount > 0; }
   /// Sample a light towards `ref` with one 2D sample u: u.x chooses the light, then, rescaled to
-  /// [0,1) within the chosen light's share of the CDF, picks the point with u.y. Choice and
-  /// point from one stratified 2D sample keep the point set on each light stratified (two
-  /// separate samples would pick each triangle's points at random from a net), which matters
-  /// for quads, two triangles of equal power.
-  /// Without `withEnvironment` the environment is left out (the other lights chosen by power
-  /// among themselves; no sample where it is the only light).
+  /// [0,1) within the chosen light's share, picks the point with u.y. Choice and point from one
+  /// stratified 2D sample keep the point set on each light stratified (two separate samples
+  /// would pick each triangle's points at random from a net), which matters for quads, two
+  /// triangles of equal power; and a pixel's stratified u.x spread its samples over the lights
+  /// in proportion to their probabilities.
+  /// `normal` (unit, either side), where given, is the receiver's: the tree then bounds the
+  /// receiver's cosine too.
+  /// Without `withEnvironment` the environment is left out (the other lights chosen among
+  /// themselves; no sample where it is the only light).
   /// With `cosineAbout` (a unit normal) a constant environment's direction is a one-sample
   /// mixture, three quarters cosine-weighted about the normal and a quarter uniform, the pdf
   /// the mixture's (a constant sky through a window then wastes few samples below the surface;
   /// a map keeps its own luminance sampler: mixing measured noisier under a bright patch).
   /// escapedPdf is the pdf without it.
   LightSample sampleLight(const Vec3& ref, const Vec2& u, bool withEnvironment = true,
-                          const Vec3* cosineAbout = nullptr) const;
+                          const Vec3* cosineAbout = nullptr, const Vec3* normal = nullptr) const;
   /// The environment's own sample, as sampleLight draws it once it has chosen the environment
   /// (`cosineAbout` likewise), its pdf the direction's alone (no choice among the lights); no
   /// sample without an environment.
   LightSample sampleEnvironment(const Vec3& ref, const Vec2& u, const Vec3* cosineAbout = nullptr) const;
-  /// Solid-angle pdf of sampleLight choosing point `lightPos` on emissive `triangle` from ref.
-  float lightPdf(const Vec3& ref, uint32_t triangle, const Vec3& lightPos, const Vec3& lightNormal) const;
+  /// Solid-angle pdf of sampleLight (with the environment, and `normal` as given to it)
+  /// choosing point `lightPos` on emissive `triangle` from ref.
+  float lightPdf(const Vec3& ref, const Vec3* normal, uint32_t triangle, const Vec3& lightPos,
+                 const Vec3& lightNormal) const;
+  /// The probability that sampleLight (with the environment) chooses light `light` (the order
+  /// of lightCount(): emissive triangles, point lights, directional lights, the environment).
+  float lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) const;
+  /// The light tree over the bounded lights (empty without any).
+  const LightTree& lightTree() const { return m_tree; }
+  /// Choose lights by the tree (true) or by power alone (false) from now on.
+  void setLightTree(bool on) { render.lightTree = on; }
   /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
   /// environment's and that of every finite sun whose disc it meets; zero without them.
   Vec3 escaped(const Vec3& dir) const;
@@ -187,7 +207,7 @@ public:
   Vec3 escapedMis(const Vec3& dir, float bsdfPdf) const;
   /// Solid-angle pdf of sampleLight choosing the environment in direction `dir`; zero without one.
   float escapedPdf(const Vec3& dir) const {
-    return environment && !m_lightPmf.empty() ? m_lightPmf.back() * environment->pdf(dir) : 0.0f;
+    return environment && !m_groupPmf.empty() ? m_groupPmf.back() * environment->pdf(dir) : 0.0f;
   }
   /// Total emitted power (W, luminance), for photon emission in part 2.
   float totalLightPower() const { return m_totalPower; }
@@ -204,10 +224,15 @@ private:
   std::vector<uint32_t> m_emissiveTris;    ///< light index i < size: triangle id
   std::vector<float> m_emissiveArea;       ///< per emissive triangle: its area
   std::vector<Vec3> m_emissiveNormal;      ///< per emissive triangle: its unit winding normal
-  std::vector<float> m_lightCdf;           ///< cumulative power, normalized; lights are
-                                           ///< [emissive triangles..., point lights...,
-                                           ///<  directional lights..., environment]
-  std::vector<float> m_lightPmf;
+  /// The choice among groups: [bounded lights (when any), directional lights..., environment],
+  /// cumulative and per group, in proportion to power.
+  std::vector<float> m_groupCdf;
+  std::vector<float> m_groupPmf;
+  bool m_hasBounded = false;
+  size_t m_lightCount = 0;
+  LightTree m_tree;                        ///< over the bounded lights
+  std::vector<float> m_boundedCdf;         ///< by power among the bounded lights (no tree)
+  std::vector<float> m_boundedPmf;
   std::vector<int32_t> m_triLightIndex;    ///< per triangle: light index or -1
   float m_totalPower = 0.0f;
 };

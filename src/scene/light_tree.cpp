@@ -1,0 +1,236 @@
+#include "voxcone/scene/light_tree.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace voxcone {
+
+namespace {
+
+/// cos(max(0, a - b)) from the sines and cosines of angles a, b in [0, pi].
+inline float cosSubClamped(float sinA, float cosA, float sinB, float cosB) {
+  return cosA > cosB ? 1.0f : cosA * cosB + sinA * sinB;
+}
+/// sin(max(0, a - b)) likewise.
+inline float sinSubClamped(float sinA, float cosA, float sinB, float cosB) {
+  return cosA > cosB ? 0.0f : sinA * cosB - cosA * sinB;
+}
+inline float safeAcos(float x) { return std::acos(std::clamp(x, -1.0f, 1.0f)); }
+
+/// The cosine of the half-angle of the cone of directions from p that the box subtends (its
+/// bounding sphere's); -1 from inside the box.
+float cosSubtended(const Bounds3& b, const Vec3& p) {
+  if (b.contains(p)) return -1.0f;
+  const Vec3 c = b.center();
+  const float r2 = 0.25f * glm::dot(b.diagonal(), b.diagonal());
+  const Vec3 d = p - c;
+  const float dist2 = glm::dot(d, d);
+  if (dist2 <= r2) return -1.0f;
+  return safeSqrt(1.0f - r2 / dist2);
+}
+
+/// The solid-angle measure of the orientation bounds (pbrt-v4's M_omega): the cone of normals
+/// widened by the emission's reach.
+float orientationMeasure(const LightBounds& b) {
+  const float theta_o = safeAcos(b.cosTheta_o), theta_e = safeAcos(b.cosTheta_e);
+  const float theta_w = std::min(theta_o + theta_e, kPi);
+  const float sinTheta_o = safeSqrt(1.0f - b.cosTheta_o * b.cosTheta_o);
+  return 2.0f * kPi * (1.0f - b.cosTheta_o) +
+         0.5f * kPi * (2.0f * theta_w * sinTheta_o - std::cos(theta_o - 2.0f * theta_w) - 2.0f * theta_o * sinTheta_o +
+                       b.cosTheta_o);
+}
+
+}  // namespace
+
+float LightBounds::importance(const Vec3& p, const Vec3* n) const {
+  if (!(phi > 0.0f)) return 0.0f;
+  const Vec3 pc = bounds.center();
+  const Vec3 diag = bounds.diagonal();
+  const Vec3 d = p - pc;
+  const float dist2 = glm::dot(d, d);
+  // The distance is at least half the box's diagonal: inside or near the box every light of it
+  // may be as close as that.
+  const float d2 = std::max({dist2, 0.25f * glm::dot(diag, diag), 1e-20f});
+  const Vec3 wi = dist2 > 0.0f ? d / std::sqrt(dist2) : Vec3(0.0f, 0.0f, 1.0f);
+  float cosTheta_w = glm::dot(w, wi);
+  if (twoSided) cosTheta_w = std::fabs(cosTheta_w);
+  const float sinTheta_w = safeSqrt(1.0f - cosTheta_w * cosTheta_w);
+  const float cosTheta_b = cosSubtended(bounds, p);
+  const float sinTheta_b = safeSqrt(1.0f - cosTheta_b * cosTheta_b);
+  // The smallest angle between an emission normal and a direction from the bounds to p:
+  // theta_w - theta_o - theta_b, clamped at 0.
+  const float sinTheta_o = safeSqrt(1.0f - cosTheta_o * cosTheta_o);
+  const float cosTheta_x = cosSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
+  const float sinTheta_x = sinSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
+  const float cosThetap = cosSubClamped(sinTheta_x, cosTheta_x, sinTheta_b, cosTheta_b);
+  if (cosThetap <= cosTheta_e) return 0.0f;
+  float imp = phi * cosThetap / d2;
+  if (n) {
+    // The receiver's |cos| at most that of the direction to the box's centre widened by the
+    // box's angle.
+    const float cosTheta_i = std::fabs(glm::dot(wi, *n));
+    const float sinTheta_i = safeSqrt(1.0f - cosTheta_i * cosTheta_i);
+    imp *= cosSubClamped(sinTheta_i, cosTheta_i, sinTheta_b, cosTheta_b);
+  }
+  return std::max(imp, 0.0f);
+}
+
+LightBounds unite(const LightBounds& a, const LightBounds& b) {
+  if (!(a.phi > 0.0f)) return b;
+  if (!(b.phi > 0.0f)) return a;
+  LightBounds r;
+  r.bounds = unite(a.bounds, b.bounds);
+  r.phi = a.phi + b.phi;
+  r.cosTheta_e = std::min(a.cosTheta_e, b.cosTheta_e);
+  r.twoSided = a.twoSided || b.twoSided;
+  // The smallest cone holding both cones of normals (pbrt-v4's DirectionCone Union).
+  const float theta_a = safeAcos(a.cosTheta_o), theta_b = safeAcos(b.cosTheta_o);
+  const float theta_d = safeAcos(glm::dot(a.w, b.w));
+  if (std::min(theta_d + theta_b, kPi) <= theta_a) {
+    r.w = a.w;
+    r.cosTheta_o = a.cosTheta_o;
+  } else if (std::min(theta_d + theta_a, kPi) <= theta_b) {
+    r.w = b.w;
+    r.cosTheta_o = b.cosTheta_o;
+  } else {
+    const float theta_o = 0.5f * (theta_a + theta_d + theta_b);
+    const Vec3 axis = glm::cross(a.w, b.w);
+    const float len = glm::length(axis);
+    if (theta_o >= kPi || !(len > 1e-12f)) {
+      r.w = a.w;
+      r.cosTheta_o = -1.0f;
+    } else {
+      // a.w turned towards b.w by theta_o - theta_a about their common perpendicular.
+      const float theta_r = theta_o - theta_a;
+      const Vec3 k = axis / len;
+      r.w = glm::normalize(a.w * std::cos(theta_r) + glm::cross(k, a.w) * std::sin(theta_r));
+      r.cosTheta_o = std::cos(theta_o);
+    }
+  }
+  return r;
+}
+
+LightTree::LightTree(const std::vector<LightBounds>& lights) {
+  m_leafOf.assign(lights.size(), UINT32_MAX);
+  std::vector<uint32_t> idx;
+  for (uint32_t i = 0; i < lights.size(); ++i)
+    if (lights[i].phi > 0.0f) idx.push_back(i);
+  if (idx.empty()) return;
+  m_nodes.reserve(2 * idx.size() - 1);
+  build(idx, 0, idx.size(), lights, UINT32_MAX, 0);
+}
+
+uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, const std::vector<LightBounds>& lights,
+                          uint32_t parent, int depth) {
+  const uint32_t self = static_cast<uint32_t>(m_nodes.size());
+  m_nodes.emplace_back();
+  m_nodes[self].parent = parent;
+  m_depth = std::max(m_depth, depth);
+  if (end - begin == 1) {
+    Node& leaf = m_nodes[self];
+    leaf.lb = lights[idx[begin]];
+    leaf.light = idx[begin];
+    leaf.leaf = true;
+    m_leafOf[idx[begin]] = self;
+    return self;
+  }
+  // The split of least surface-area-orientation cost over 12 bins of the centroids per axis.
+  Bounds3 bounds, centroids;
+  for (size_t i = begin; i < end; ++i) {
+    bounds.extend(lights[idx[i]].bounds);
+    centroids.extend(lights[idx[i]].bounds.center());
+  }
+  constexpr int kBins = 12;
+  float bestCost = kInf;
+  int bestDim = -1, bestBin = -1;
+  const Vec3 cd = centroids.diagonal();
+  const float maxExtent = std::max({bounds.diagonal().x, bounds.diagonal().y, bounds.diagonal().z});
+  for (int dim = 0; dim < 3; ++dim) {
+    if (!(cd[dim] > 0.0f)) continue;
+    std::array<LightBounds, kBins> bin{};
+    const auto binOf = [&](uint32_t li) {
+      const float t = (lights[li].bounds.center()[dim] - centroids.lo[dim]) / cd[dim];
+      return std::clamp(static_cast<int>(t * kBins), 0, kBins - 1);
+    };
+    for (size_t i = begin; i < end; ++i) bin[size_t(binOf(idx[i]))] = unite(bin[size_t(binOf(idx[i]))], lights[idx[i]]);
+    const float kr = maxExtent / std::max(bounds.diagonal()[dim], 1e-30f);
+    const auto cost = [&](const LightBounds& b) { return b.phi > 0.0f ? b.phi * orientationMeasure(b) * b.bounds.area() : 0.0f; };
+    for (int split = 0; split < kBins - 1; ++split) {
+      LightBounds below, above;
+      for (int b = 0; b <= split; ++b) below = unite(below, bin[size_t(b)]);
+      for (int b = split + 1; b < kBins; ++b) above = unite(above, bin[size_t(b)]);
+      if (!(below.phi > 0.0f) || !(above.phi > 0.0f)) continue;
+      const float c = kr * (cost(below) + cost(above));
+      if (c < bestCost) {
+        bestCost = c;
+        bestDim = dim;
+        bestBin = split;
+      }
+    }
+  }
+  size_t mid;
+  if (bestDim >= 0) {
+    const auto it = std::partition(idx.begin() + long(begin), idx.begin() + long(end), [&](uint32_t li) {
+      const float t = (lights[li].bounds.center()[bestDim] - centroids.lo[bestDim]) / cd[bestDim];
+      return std::clamp(static_cast<int>(t * kBins), 0, kBins - 1) <= bestBin;
+    });
+    mid = size_t(it - idx.begin());
+  } else {
+    mid = begin;
+  }
+  if (mid == begin || mid == end) {
+    // Coincident centroids (or zero-cost bins): halves by index, which terminates.
+    mid = (begin + end) / 2;
+  }
+  build(idx, begin, mid, lights, self, depth + 1);
+  const uint32_t second = build(idx, mid, end, lights, self, depth + 1);
+  Node& node = m_nodes[self];
+  node.second = second;
+  node.lb = unite(m_nodes[self + 1].lb, m_nodes[second].lb);
+  return self;
+}
+
+bool LightTree::sample(const Vec3& p, const Vec3* n, float& u, uint32_t& light, float& pmf) const {
+  if (m_nodes.empty()) return false;
+  uint32_t i = 0;
+  pmf = 1.0f;
+  while (!m_nodes[i].leaf) {
+    const uint32_t c0 = i + 1, c1 = m_nodes[i].second;
+    const float i0 = m_nodes[c0].lb.importance(p, n), i1 = m_nodes[c1].lb.importance(p, n);
+    const float sum = i0 + i1;
+    if (!(sum > 0.0f)) return false;
+    const float p0 = i0 / sum;
+    if (u < p0) {
+      u = std::min(u / p0, kOneMinusEpsilon);
+      pmf *= p0;
+      i = c0;
+    } else {
+      u = std::min((u - p0) / (1.0f - p0), kOneMinusEpsilon);
+      pmf *= 1.0f - p0;
+      i = c1;
+    }
+  }
+  light = m_nodes[i].light;
+  return pmf > 0.0f;
+}
+
+float LightTree::pmf(const Vec3& p, const Vec3* n, uint32_t light) const {
+  if (light >= m_leafOf.size() || m_leafOf[light] == UINT32_MAX) return 0.0f;
+  float pmf = 1.0f;
+  uint32_t i = m_leafOf[light];
+  while (m_nodes[i].parent != UINT32_MAX) {
+    const uint32_t parent = m_nodes[i].parent;
+    const uint32_t c0 = parent + 1, c1 = m_nodes[parent].second;
+    const float i0 = m_nodes[c0].lb.importance(p, n), i1 = m_nodes[c1].lb.importance(p, n);
+    const float sum = i0 + i1;
+    if (!(sum > 0.0f)) return 0.0f;
+    // The same arithmetic as sample()'s choice.
+    const float p0 = i0 / sum;
+    pmf *= i == c0 ? p0 : 1.0f - p0;
+    i = parent;
+  }
+  return pmf;
+}
+
+}  // namespace voxcone
