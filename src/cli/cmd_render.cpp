@@ -118,7 +118,10 @@ void runRender(const RenderOptions& o) {
   if (o.seed) settings.seed = *o.seed;
   if (o.maxDepth != 0) settings.maxDepth = o.maxDepth;
   if (!o.sampler.empty()) settings.sampler = samplerKindFromName(o.sampler);
-  if (!o.lightSampler.empty()) scene.setLightTree(settings.lightTree = o.lightSampler == "tree");
+  if (!o.lightSampler.empty()) {
+    settings.lightTree = o.lightSampler == "tree";
+    scene.setLightTree(settings.lightTree);
+  }
   settings.validate();
   AovRequest aovs;
   if (!o.aovs.empty()) {

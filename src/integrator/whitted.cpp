@@ -37,8 +37,8 @@ Vec3 shadeLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& 
 
 Vec3 directLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u,
                        bool withEnvironment, float minDistance) {
-  return shadeLightSample(scene, accel, hit, woWorld, scene.sampleLight(hit.position, u, withEnvironment, &hit.shadingNormal, &hit.shadingNormal),
-                          minDistance);
+  const LightSample ls = scene.sampleLight(hit.position, u, withEnvironment, &hit.shadingNormal, &hit.shadingNormal);
+  return shadeLightSample(scene, accel, hit, woWorld, ls, minDistance);
 }
 
 Vec3 environmentLightSample(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& woWorld, const Vec2& u) {

@@ -118,15 +118,14 @@ LightTree::LightTree(const std::vector<LightBounds>& lights) {
     if (lights[i].phi > 0.0f) idx.push_back(i);
   if (idx.empty()) return;
   m_nodes.reserve(2 * idx.size() - 1);
-  build(idx, 0, idx.size(), lights, UINT32_MAX, 0);
+  build(idx, 0, idx.size(), lights, UINT32_MAX);
 }
 
 uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, const std::vector<LightBounds>& lights,
-                          uint32_t parent, int depth) {
+                          uint32_t parent) {
   const uint32_t self = static_cast<uint32_t>(m_nodes.size());
   m_nodes.emplace_back();
   m_nodes[self].parent = parent;
-  m_depth = std::max(m_depth, depth);
   if (end - begin == 1) {
     Node& leaf = m_nodes[self];
     leaf.lb = lights[idx[begin]];
@@ -146,22 +145,27 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
   int bestDim = -1, bestBin = -1;
   const Vec3 cd = centroids.diagonal();
   const float maxExtent = std::max({bounds.diagonal().x, bounds.diagonal().y, bounds.diagonal().z});
+  const auto binOf = [&](int dim, uint32_t li) {
+    const float t = (lights[li].bounds.center()[dim] - centroids.lo[dim]) / cd[dim];
+    return std::clamp(static_cast<int>(t * kBins), 0, kBins - 1);
+  };
+  const auto cost = [](const LightBounds& b) { return b.phi > 0.0f ? b.phi * orientationMeasure(b) * b.bounds.area() : 0.0f; };
   for (int dim = 0; dim < 3; ++dim) {
     if (!(cd[dim] > 0.0f)) continue;
     std::array<LightBounds, kBins> bin{};
-    const auto binOf = [&](uint32_t li) {
-      const float t = (lights[li].bounds.center()[dim] - centroids.lo[dim]) / cd[dim];
-      return std::clamp(static_cast<int>(t * kBins), 0, kBins - 1);
-    };
-    for (size_t i = begin; i < end; ++i) bin[size_t(binOf(idx[i]))] = unite(bin[size_t(binOf(idx[i]))], lights[idx[i]]);
+    for (size_t i = begin; i < end; ++i) {
+      LightBounds& b = bin[size_t(binOf(dim, idx[i]))];
+      b = unite(b, lights[idx[i]]);
+    }
+    // above[s]: bins s + 1 and up together, for the sweep of splits after bin s.
+    std::array<LightBounds, kBins> above{};
+    for (int s = kBins - 2; s >= 0; --s) above[size_t(s)] = unite(above[size_t(s) + 1], bin[size_t(s) + 1]);
     const float kr = maxExtent / std::max(bounds.diagonal()[dim], 1e-30f);
-    const auto cost = [&](const LightBounds& b) { return b.phi > 0.0f ? b.phi * orientationMeasure(b) * b.bounds.area() : 0.0f; };
+    LightBounds below;
     for (int split = 0; split < kBins - 1; ++split) {
-      LightBounds below, above;
-      for (int b = 0; b <= split; ++b) below = unite(below, bin[size_t(b)]);
-      for (int b = split + 1; b < kBins; ++b) above = unite(above, bin[size_t(b)]);
-      if (!(below.phi > 0.0f) || !(above.phi > 0.0f)) continue;
-      const float c = kr * (cost(below) + cost(above));
+      below = unite(below, bin[size_t(split)]);
+      if (!(below.phi > 0.0f) || !(above[size_t(split)].phi > 0.0f)) continue;
+      const float c = kr * (cost(below) + cost(above[size_t(split)]));
       if (c < bestCost) {
         bestCost = c;
         bestDim = dim;
@@ -171,10 +175,8 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
   }
   size_t mid;
   if (bestDim >= 0) {
-    const auto it = std::partition(idx.begin() + long(begin), idx.begin() + long(end), [&](uint32_t li) {
-      const float t = (lights[li].bounds.center()[bestDim] - centroids.lo[bestDim]) / cd[bestDim];
-      return std::clamp(static_cast<int>(t * kBins), 0, kBins - 1) <= bestBin;
-    });
+    const auto it = std::partition(idx.begin() + long(begin), idx.begin() + long(end),
+                                   [&](uint32_t li) { return binOf(bestDim, li) <= bestBin; });
     mid = size_t(it - idx.begin());
   } else {
     mid = begin;
@@ -183,8 +185,8 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
     // Coincident centroids (or zero-cost bins): halves by index, which terminates.
     mid = (begin + end) / 2;
   }
-  build(idx, begin, mid, lights, self, depth + 1);
-  const uint32_t second = build(idx, mid, end, lights, self, depth + 1);
+  build(idx, begin, mid, lights, self);
+  const uint32_t second = build(idx, mid, end, lights, self);
   Node& node = m_nodes[self];
   node.second = second;
   node.lb = unite(m_nodes[self + 1].lb, m_nodes[second].lb);

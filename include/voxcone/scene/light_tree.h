@@ -48,8 +48,6 @@ public:
 
   bool empty() const { return m_nodes.empty(); }
   size_t nodeCount() const { return m_nodes.size(); }
-  /// Depth of the deepest leaf (the root's is 0).
-  int depth() const { return m_depth; }
 
   /// Chooses a light for point p (normal n, or null) with u in [0, 1): its index and the
   /// probability of choosing it; u is rescaled in place to [0, 1) within the chosen light's
@@ -67,11 +65,10 @@ private:
     bool leaf = false;
   };
   uint32_t build(std::vector<uint32_t>& idx, size_t begin, size_t end, const std::vector<LightBounds>& lights,
-                 uint32_t parent, int depth);
+                 uint32_t parent);
 
   std::vector<Node> m_nodes;
   std::vector<uint32_t> m_leafOf;  ///< per light: its leaf node, or UINT32_MAX
-  int m_depth = 0;
 };
 
 }  // namespace voxcone

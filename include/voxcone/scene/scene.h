@@ -192,8 +192,6 @@ public:
   /// The probability that sampleLight (with the environment) chooses light `light` (the order
   /// of lightCount(): emissive triangles, point lights, directional lights, the environment).
   float lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) const;
-  /// The light tree over the bounded lights (empty without any).
-  const LightTree& lightTree() const { return m_tree; }
   /// Choose lights by the tree (true) or by power alone (false) from now on.
   void setLightTree(bool on) { render.lightTree = on; }
   /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
