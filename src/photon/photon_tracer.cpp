@@ -16,8 +16,10 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 
 namespace voxcone {
 
@@ -40,18 +42,21 @@ constexpr uint64_t kBlockSize = 4096;
 
 enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 
-/// Trace photon `index` of `pass` and append what it stores to `out` (and, with `bins`, the
-/// emission guide's bin of each to `bins`). `powerScale` is one over the photons emitted in the
-/// pass, so that each pass carries the lights' full flux.
+/// Trace photon `index` of the `count` of `pass` and append what it stores to `out` (and, with
+/// `bins`, the emission guide's bin of each to `bins`). Each photon carries 1 / count of the
+/// lights' flux, so that each pass carries it all.
 void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
-                 Pass pass, uint64_t index, double powerScale, const Sphere& aim, std::vector<Photon>& out,
+                 Pass pass, uint64_t index, uint64_t count, const Sphere& aim, std::vector<Photon>& out,
                  std::vector<uint32_t>* bins) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
 
-  // Emission. The light choice takes 32 random bits as a double (the CDF is double).
+  // Emission. The light choice is stratified over the pass, (index + u) / count: each light
+  // (and, guided, each bin of the guide) emits its share of the photons to within one, where
+  // independent choices would leave a 16-light room's dimmest lights a few photons each, give
+  // or take half. 32 random bits as a double (the CDF is double).
   EmittedPhoton e;
-  double uLight = double(rng.nextU32()) * 0x1p-32;
+  double uLight = std::min((double(index) + double(rng.nextU32()) * 0x1p-32) / double(count), std::nextafter(1.0, 0.0));
   const float uSide = rng.uniform();
   const Vec2 uPos = rng.uniform2();
   Vec2 uDir = rng.uniform2();
@@ -63,7 +68,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
   const bool aimed = pass == Pass::Caustic && aim.radius >= 0.0f;
   if (!(aimed ? lights.sampleToward(uLight, uSide, uPos, uDir, aim, e) : lights.sample(uLight, uSide, uPos, uDir, e)))
     return;
-  Vec3 power = Vec3(e.fluxWatts * (powerScale * guideWeight));
+  Vec3 power = Vec3(e.fluxWatts * (guideWeight / double(count)));
   if (!isFinite(power) || !(maxComponent(power) > 0.0f)) return;
   Ray ray = e.ray;
 
@@ -178,11 +183,10 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
       const uint64_t p = static_cast<uint64_t>(pass);
       const uint64_t first = (b - (pass == Pass::Global ? 0 : blocks[0])) * kBlockSize;
       const uint64_t last = std::min(counts[p], first + kBlockSize);
-      const double powerScale = 1.0 / double(counts[p]);
       std::vector<Photon>& out = perBlock[b];
       std::vector<uint32_t>* bins = record && pass == Pass::Global ? &perBlockBins[b] : nullptr;
       for (uint64_t i = first; i < last; ++i)
-        tracePhoton(scene, accel, lights, settings, pass, i, powerScale, aim, out, bins);
+        tracePhoton(scene, accel, lights, settings, pass, i, counts[p], aim, out, bins);
       prog.advance(last - first);
     }
   });
