@@ -43,6 +43,7 @@ struct RenderOptions {
   std::string accel = "hbvh";
   std::string sampler;
   std::string lightSampler;       // --light-sampler: tree or power
+  std::optional<float> lightSplit;  // --light-split: the tree's split angle, degrees
   double targetError = 0.0;
   double timeBudget = 0.0;
   std::string field;              // --field: a .vdb to render with (voxcone)
@@ -121,6 +122,10 @@ void runRender(const RenderOptions& o) {
   if (!o.lightSampler.empty()) {
     settings.lightTree = o.lightSampler == "tree";
     scene.setLightTree(settings.lightTree);
+  }
+  if (o.lightSplit) {
+    settings.lightSplitDeg = *o.lightSplit;
+    scene.setLightSplit(settings.lightSplitDeg);
   }
   settings.validate();
   AovRequest aovs;
@@ -232,7 +237,8 @@ void runRender(const RenderOptions& o) {
   meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
                       {"max_depth", settings.maxDepth}, {"seed", settings.seed},
                       {"sampler", samplerNames()[size_t(settings.sampler)]},
-                      {"light_sampler", settings.lightTree ? "tree" : "power"}, {"threads", threads.threads()},
+                      {"light_sampler", settings.lightTree ? "tree" : "power"},
+                      {"light_split", settings.lightTree ? settings.lightSplitDeg : 0.0f}, {"threads", threads.threads()},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
   if (!result.layers.empty()) {
@@ -336,6 +342,11 @@ void addRenderCommand(CLI::App& app) {
                   "How a shading point chooses among the bounded lights: tree (by estimated contribution) or power")
       ->check(CLI::IsMember({"tree", "power"}))
       ->default_str("the scene's, else tree");
+  cmd->add_option("--light-split", o->lightSplit,
+                  "The light tree's split angle, degrees: a node seen wider than it (or from inside) gives a light "
+                  "sample from each child (0: one light per sample)")
+      ->check(CLI::Range(0.0f, 90.0f))
+      ->default_str("the scene's, else " + std::to_string(int(RenderSettings().lightSplitDeg)));
   cmd->add_option("-t,--threads", o->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
   cmd->add_option("--max-depth", o->maxDepth, "Maximum path length / recursion depth")->check(CLI::Range(1, 1024))->default_str("the scene's");
   cmd->add_option("--options", o->integratorOptions, "Integrator options as a JSON object");

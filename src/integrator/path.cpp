@@ -12,11 +12,15 @@ PathIntegrator::PathIntegrator(const IntegratorContext& c)
   OptionReader r(c.options, "path");
   m_rrDepth = r.integer("rr_depth", 3, 0, 1024);
   m_nee = r.choice("light_sampling", {"nee", "none"}) == "nee";
+  m_lightSamples = r.integer("light_samples", 1, 1, 64);
   r.finish();
 }
 
 nlohmann::json PathIntegrator::settingsJson() const {
-  return {{"max_depth", m_maxDepth}, {"rr_depth", m_rrDepth}, {"light_sampling", m_nee ? "nee" : "none"}};
+  return {{"max_depth", m_maxDepth},
+          {"rr_depth", m_rrDepth},
+          {"light_sampling", m_nee ? "nee" : "none"},
+          {"light_samples", m_lightSamples}};
 }
 
 Vec3 PathIntegrator::li(const Ray& ray, Sampler& sampler) const { return trace(ray, sampler, nullptr); }
@@ -47,7 +51,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
     if (!intersectSurface(m_scene, m_accel, ray, sh)) {
       // The ray leaves the scene: the environment's radiance, MIS-weighted as emission is.
       const Vec3 dir = glm::normalize(ray.dir);
-      const Vec3 Le = specularBounce || !m_nee ? m_scene.escaped(dir) : m_scene.escapedMis(dir, prevPdf);
+      const Vec3 Le = specularBounce || !m_nee ? m_scene.escaped(dir) : m_scene.escapedMis(dir, prevPdf / float(m_lightSamples));
       if (!isBlack(Le)) {
         const Vec3 c = beta * Le;
         L += c;
@@ -66,7 +70,7 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
         c = beta * Le;
       } else {
         const float lightPdf = m_scene.lightPdf(prevPos, &prevNormal, sh.triangle, pos, sh.geomNormal);
-        c = beta * Le * powerHeuristic(prevPdf, lightPdf);
+        c = beta * Le * powerHeuristic(prevPdf, float(m_lightSamples) * lightPdf);
       }
       L += c;
       if (terms) *term(deltaSinceDiffuse) += c;
@@ -78,17 +82,27 @@ Vec3 PathIntegrator::trace(const Ray& cameraRay, Sampler& sampler, RadianceTerms
     const Frame frame(sh.shadingNormal);
     const Vec3 wo = frame.toLocal(woWorld);
 
-    // Next-event estimation: one light sample, MIS-weighted against BSDF sampling.
+    // Next-event estimation: light_samples light samples, their choice stratified (one pair
+    // shifted by i / n in u.x), each MIS-weighted against BSDF sampling (Veach's multi-sample
+    // power heuristic); with the light tree's splitting each takes one light per group.
     if (m_nee && !mat.isDelta()) {
-      const LightSample ls = m_scene.sampleLight(pos, sampler.uniform2(), true, nullptr, &sh.shadingNormal);
-      if (ls.pdf > 0.0f) {
-        const Vec3 wi = frame.toLocal(ls.wi);
-        const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
-        const Ray shadow =
-            spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
-        if (!isBlack(f) && !m_accel.occluded(shadow)) {
-          const float w = ls.delta ? 1.0f : powerHeuristic(ls.pdf, bsdfPdf(mat, wo, wi));
-          const Vec3 c = beta * f * ls.radiance * (w / ls.pdf);
+      const Vec2 u0 = sampler.uniform2();
+      const float nl = float(m_lightSamples);
+      for (int i = 0; i < m_lightSamples; ++i) {
+        const Vec2 ui(std::min((float(i) + u0.x) / nl, kOneMinusEpsilon), u0.y);
+        LightSample samples[LightTree::kMaxChoices];
+        const int count = m_scene.sampleLights(pos, ui, true, nullptr, &sh.shadingNormal, samples);
+        for (int k = 0; k < count; ++k) {
+          const LightSample& ls = samples[k];
+          if (!(ls.pdf > 0.0f)) continue;
+          const Vec3 wi = frame.toLocal(ls.wi);
+          const Vec3 f = bsdfEval(mat, wo, wi) * std::fabs(wi.z);
+          if (isBlack(f)) continue;
+          const Ray shadow =
+              spawnRayTo(pos, sh.positionError, sh.geomNormal, ls.lightPos, ls.lightPosError, ls.lightNormal);
+          if (m_accel.occluded(shadow)) continue;
+          const float w = ls.delta ? 1.0f : powerHeuristic(nl * ls.pdf, bsdfPdf(mat, wo, wi));
+          const Vec3 c = beta * f * ls.radiance * (w / (nl * ls.pdf));
           L += c;
           if (terms) {
             ++diffuseVertices;  // this vertex, for the light it samples

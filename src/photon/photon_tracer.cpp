@@ -29,6 +29,7 @@ nlohmann::json PhotonStats::toJson() const {
           {"emitted_caustic", emittedCaustic},
           {"stored_global", storedGlobal},
           {"stored_caustic", storedCaustic},
+          {"stored_glossy_caustic", storedGlossyCaustic},
           {"emitted_power", {emittedPower.x, emittedPower.y, emittedPower.z}},
           {"seconds", seconds},
           {"photons_per_second", seconds > 0.0 ? emitted / seconds : 0.0}};
@@ -43,11 +44,12 @@ constexpr uint64_t kBlockSize = 4096;
 enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 
 /// Trace photon `index` of the `count` of `pass` and append what it stores to `out` (and, with
-/// `bins`, the emission guide's bin of each to `bins`). Each photon carries 1 / count of the
+/// `bins`, the emission guide's bin of each to `bins`; a caustic photon's glossy hit to
+/// `glossyOut`). Each photon carries 1 / count of the
 /// lights' flux, so that each pass carries it all.
 void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
                  Pass pass, uint64_t index, uint64_t count, const Sphere& aim, std::vector<Photon>& out,
-                 std::vector<uint32_t>* bins) {
+                 std::vector<uint32_t>* bins, std::vector<Photon>& glossyOut) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
 
@@ -106,7 +108,17 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
       // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.
       if (pass == Pass::Caustic) return;
     } else if (pass == Pass::Caustic && !mat.isDelta()) {
-      // A rough (glossy) bounce can never lead to L S+ D: stop early.
+      // A rough (glossy) bounce can never lead to L S+ D: the path ends here, kept where it
+      // arrived after specular bounces only (L S+ G).
+      if (specularOnly && segment > 1) {
+        Photon ph;
+        ph.position = pos;
+        ph.power = power;
+        ph.incident = woWorld;
+        ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
+        ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));
+        glossyOut.push_back(ph);
+      }
       return;
     }
     if (segment == settings.maxDepth) return;
@@ -169,7 +181,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
 
   // One parallel loop over the blocks of both passes; block b collects into perBlock[b], and
   // the blocks are concatenated in order, so the maps do not depend on the thread count.
-  std::vector<std::vector<Photon>> perBlock(blocks[0] + blocks[1]);
+  std::vector<std::vector<Photon>> perBlock(blocks[0] + blocks[1]), perBlockGlossy(blocks[0] + blocks[1]);
   const bool record = settings.recordBins && settings.guide;
   std::vector<std::vector<uint32_t>> perBlockBins(record ? blocks[0] : 0);
   std::atomic<bool> cancelled{false};
@@ -186,7 +198,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
       std::vector<Photon>& out = perBlock[b];
       std::vector<uint32_t>* bins = record && pass == Pass::Global ? &perBlockBins[b] : nullptr;
       for (uint64_t i = first; i < last; ++i)
-        tracePhoton(scene, accel, lights, settings, pass, i, counts[p], aim, out, bins);
+        tracePhoton(scene, accel, lights, settings, pass, i, counts[p], aim, out, bins, perBlockGlossy[b]);
       prog.advance(last - first);
     }
   });
@@ -201,6 +213,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
     std::vector<Photon>& dst = b < blocks[0] ? maps.global : maps.caustic;
     dst.insert(dst.end(), perBlock[b].begin(), perBlock[b].end());
     std::vector<Photon>().swap(perBlock[b]);
+    maps.glossyCaustic.insert(maps.glossyCaustic.end(), perBlockGlossy[b].begin(), perBlockGlossy[b].end());
   }
   if (record) {
     maps.globalBins.reserve(sizes[0]);
@@ -212,6 +225,7 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   maps.stats.emittedCaustic = counts[1];
   maps.stats.storedGlobal = maps.global.size();
   maps.stats.storedCaustic = maps.caustic.size();
+  maps.stats.storedGlossyCaustic = maps.glossyCaustic.size();
   maps.stats.emittedPower = Vec3(lights.totalFlux());
   maps.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return maps;

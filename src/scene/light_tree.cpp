@@ -18,18 +18,6 @@ inline float sinSubClamped(float sinA, float cosA, float sinB, float cosB) {
 }
 inline float safeAcos(float x) { return std::acos(std::clamp(x, -1.0f, 1.0f)); }
 
-/// The cosine of the half-angle of the cone of directions from p that the box subtends (its
-/// bounding sphere's); -1 from inside the box.
-float cosSubtended(const Bounds3& b, const Vec3& p) {
-  if (b.contains(p)) return -1.0f;
-  const Vec3 c = b.center();
-  const float r2 = 0.25f * glm::dot(b.diagonal(), b.diagonal());
-  const Vec3 d = p - c;
-  const float dist2 = glm::dot(d, d);
-  if (dist2 <= r2) return -1.0f;
-  return safeSqrt(1.0f - r2 / dist2);
-}
-
 /// The solid-angle measure of the orientation bounds (pbrt-v4's M_omega): the cone of normals
 /// widened by the emission's reach.
 float orientationMeasure(const LightBounds& b) {
@@ -43,28 +31,48 @@ float orientationMeasure(const LightBounds& b) {
 
 }  // namespace
 
-float LightBounds::importance(const Vec3& p, const Vec3* n) const {
+ImportanceBounds ImportanceBounds::of(const LightBounds& b) {
+  ImportanceBounds ib;
+  ib.centre = b.bounds.center();
+  ib.r2 = 0.25f * glm::dot(b.bounds.diagonal(), b.bounds.diagonal());
+  ib.r = std::sqrt(ib.r2);
+  ib.w = b.w;
+  ib.phi = b.phi;
+  ib.cosTheta_o = b.cosTheta_o;
+  ib.sinTheta_o = safeSqrt(1.0f - b.cosTheta_o * b.cosTheta_o);
+  ib.cosTheta_e = b.cosTheta_e;
+  ib.twoSided = b.twoSided;
+  return ib;
+}
+
+float LightBounds::importance(const Vec3& p, const Vec3* n) const { return ImportanceBounds::of(*this).importance(p, n); }
+
+float ImportanceBounds::importance(const Vec3& p, const Vec3* n) const {
   if (!(phi > 0.0f)) return 0.0f;
-  const Vec3 pc = bounds.center();
-  const Vec3 diag = bounds.diagonal();
-  const Vec3 d = p - pc;
+  const Vec3 d = p - centre;
   const float dist2 = glm::dot(d, d);
-  // The distance is at least half the box's diagonal: inside or near the box every light of it
-  // may be as close as that.
-  const float d2 = std::max({dist2, 0.25f * glm::dot(diag, diag), 1e-20f});
-  const Vec3 wi = dist2 > 0.0f ? d / std::sqrt(dist2) : Vec3(0.0f, 0.0f, 1.0f);
-  float cosTheta_w = glm::dot(w, wi);
-  if (twoSided) cosTheta_w = std::fabs(cosTheta_w);
-  const float sinTheta_w = safeSqrt(1.0f - cosTheta_w * cosTheta_w);
-  const float cosTheta_b = cosSubtended(bounds, p);
-  const float sinTheta_b = safeSqrt(1.0f - cosTheta_b * cosTheta_b);
+  // The distance is at least the box's bounding radius: inside or near the box every light of
+  // it may be as close as that.
+  const float d2 = std::max({dist2, r2, 1e-20f});
+  const float invDist = dist2 > 0.0f ? 1.0f / std::sqrt(dist2) : 0.0f;
+  const Vec3 wi = dist2 > 0.0f ? d * invDist : Vec3(0.0f, 0.0f, 1.0f);
+  // The cone of directions from p that the box's bounding sphere subtends (every direction from
+  // inside it): sin theta_b = r / dist.
+  const bool inside = dist2 <= r2;
+  const float sinTheta_b = inside ? 0.0f : r * invDist;
+  const float cosTheta_b = inside ? -1.0f : safeSqrt(1.0f - sinTheta_b * sinTheta_b);
   // The smallest angle between an emission normal and a direction from the bounds to p:
-  // theta_w - theta_o - theta_b, clamped at 0.
-  const float sinTheta_o = safeSqrt(1.0f - cosTheta_o * cosTheta_o);
-  const float cosTheta_x = cosSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
-  const float sinTheta_x = sinSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
-  const float cosThetap = cosSubClamped(sinTheta_x, cosTheta_x, sinTheta_b, cosTheta_b);
-  if (cosThetap <= cosTheta_e) return 0.0f;
+  // theta_w - theta_o - theta_b, clamped at 0 (a point light's cone holds every direction).
+  float cosThetap = 1.0f;
+  if (cosTheta_o > -1.0f) {
+    float cosTheta_w = glm::dot(w, wi);
+    if (twoSided) cosTheta_w = std::fabs(cosTheta_w);
+    const float sinTheta_w = safeSqrt(1.0f - cosTheta_w * cosTheta_w);
+    const float cosTheta_x = cosSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
+    const float sinTheta_x = sinSubClamped(sinTheta_w, cosTheta_w, sinTheta_o, cosTheta_o);
+    cosThetap = cosSubClamped(sinTheta_x, cosTheta_x, sinTheta_b, cosTheta_b);
+    if (cosThetap <= cosTheta_e) return 0.0f;
+  }
   float imp = phi * cosThetap / d2;
   if (n) {
     // The receiver's |cos| at most that of the direction to the box's centre widened by the
@@ -126,9 +134,11 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
   const uint32_t self = static_cast<uint32_t>(m_nodes.size());
   m_nodes.emplace_back();
   m_nodes[self].parent = parent;
+  m_nodes[self].depth = parent == UINT32_MAX ? 0 : uint8_t(std::min(255, m_nodes[parent].depth + 1));
   if (end - begin == 1) {
     Node& leaf = m_nodes[self];
     leaf.lb = lights[idx[begin]];
+    leaf.ib = ImportanceBounds::of(leaf.lb);
     leaf.light = idx[begin];
     leaf.leaf = true;
     m_leafOf[idx[begin]] = self;
@@ -190,6 +200,7 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
   Node& node = m_nodes[self];
   node.second = second;
   node.lb = unite(m_nodes[self + 1].lb, m_nodes[second].lb);
+  node.ib = ImportanceBounds::of(node.lb);
   return self;
 }
 
@@ -199,7 +210,7 @@ bool LightTree::sample(const Vec3& p, const Vec3* n, float& u, uint32_t& light, 
   pmf = 1.0f;
   while (!m_nodes[i].leaf) {
     const uint32_t c0 = i + 1, c1 = m_nodes[i].second;
-    const float i0 = m_nodes[c0].lb.importance(p, n), i1 = m_nodes[c1].lb.importance(p, n);
+    const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
     const float sum = i0 + i1;
     if (!(sum > 0.0f)) return false;
     const float p0 = i0 / sum;
@@ -224,12 +235,86 @@ float LightTree::pmf(const Vec3& p, const Vec3* n, uint32_t light) const {
   while (m_nodes[i].parent != UINT32_MAX) {
     const uint32_t parent = m_nodes[i].parent;
     const uint32_t c0 = parent + 1, c1 = m_nodes[parent].second;
-    const float i0 = m_nodes[c0].lb.importance(p, n), i1 = m_nodes[c1].lb.importance(p, n);
+    const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
     const float sum = i0 + i1;
     if (!(sum > 0.0f)) return 0.0f;
     // The same arithmetic as sample()'s choice.
     const float p0 = i0 / sum;
     pmf *= i == c0 ? p0 : 1.0f - p0;
+    i = parent;
+  }
+  return pmf;
+}
+
+bool LightTree::splits(const Node& node, const Vec3& p, float sinSplit2) const {
+  if (node.leaf || node.depth >= kSplitDepth) return false;
+  const Vec3 d = p - node.ib.centre;
+  const float dist2 = glm::dot(d, d);
+  // Inside the sphere, or its angular radius asin(r / dist) above the split angle.
+  return dist2 <= node.ib.r2 || node.ib.r2 > sinSplit2 * dist2;
+}
+
+int LightTree::sampleSplit(const Vec3& p, const Vec3* n, float u, float splitAngle, Choice* out) const {
+  if (m_nodes.empty()) return 0;
+  const float sinSplit2 = splitAngle >= 0.5f * kPi ? 1.0f : sqr(std::sin(splitAngle));
+  // Depth-first over the groups: a stack of (node, u, pmf so far in its group).
+  struct Item {
+    uint32_t node;
+    float u, pmf;
+  };
+  Item stack[kMaxChoices + 1];
+  int top = 0, count = 0;
+  stack[top++] = {0, u, 1.0f};
+  while (top > 0) {
+    Item it = stack[--top];
+    for (;;) {
+      const Node& node = m_nodes[it.node];
+      if (node.leaf) {
+        if (it.pmf > 0.0f) out[count++] = {node.light, it.pmf, it.u};
+        break;
+      }
+      const uint32_t c0 = it.node + 1, c1 = node.second;
+      if (splits(node, p, sinSplit2)) {
+        // Both children, each with the same number (their choices are independent groups).
+        stack[top++] = {c1, it.u, it.pmf};
+        it.node = c0;
+        continue;
+      }
+      const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
+      const float sum = i0 + i1;
+      if (!(sum > 0.0f)) break;
+      const float p0 = i0 / sum;
+      if (it.u < p0) {
+        it.u = std::min(it.u / p0, kOneMinusEpsilon);
+        it.pmf *= p0;
+        it.node = c0;
+      } else {
+        it.u = std::min((it.u - p0) / (1.0f - p0), kOneMinusEpsilon);
+        it.pmf *= 1.0f - p0;
+        it.node = c1;
+      }
+    }
+  }
+  return count;
+}
+
+float LightTree::pmfSplit(const Vec3& p, const Vec3* n, uint32_t light, float splitAngle) const {
+  if (light >= m_leafOf.size() || m_leafOf[light] == UINT32_MAX) return 0.0f;
+  const float sinSplit2 = splitAngle >= 0.5f * kPi ? 1.0f : sqr(std::sin(splitAngle));
+  float pmf = 1.0f;
+  uint32_t i = m_leafOf[light];
+  while (m_nodes[i].parent != UINT32_MAX) {
+    const uint32_t parent = m_nodes[i].parent;
+    const Node& pn = m_nodes[parent];
+    if (!splits(pn, p, sinSplit2)) {
+      const uint32_t c0 = parent + 1, c1 = pn.second;
+      const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
+      const float sum = i0 + i1;
+      if (!(sum > 0.0f)) return 0.0f;
+      // The same arithmetic as sampleSplit's choice.
+      const float p0 = i0 / sum;
+      pmf *= i == c0 ? p0 : 1.0f - p0;
+    }
     i = parent;
   }
   return pmf;

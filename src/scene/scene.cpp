@@ -142,25 +142,32 @@ Vec3 Scene::emitted(const SurfaceHit& hit, const Vec3& w) const {
   return Vec3(0.0f);
 }
 
-LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout,
-                               const Vec3* normal) const {
-  LightSample ls;
-  if (m_groupCdf.empty()) return ls;
-  // Choose a group by power (binary search in the CDF), then reuse u.x within its interval.
-  // Without the environment (the last group) u.x is squeezed below its interval and the
-  // choice's probability renormalized.
+bool Scene::chooseGroup(float u, bool withEnvironment, size_t& group, float& pmf, float& rescaled) const {
+  if (m_groupCdf.empty()) return false;
+  // Choose a group by power (binary search in the CDF), then reuse u within its interval.
+  // Without the environment (the last group) u is squeezed below its interval and the choice's
+  // probability renormalized.
   const bool dropEnvironment = environment && !withEnvironment;
   const size_t count = m_groupCdf.size() - (dropEnvironment ? 1 : 0);
   const float share = dropEnvironment ? (count == 0 ? 0.0f : m_groupCdf[count - 1]) : 1.0f;
-  if (!(share > 0.0f)) return ls;
-  const float uc = std::min(uChoice.x * share, share * kOneMinusEpsilon);
-  const size_t group = std::min(
+  if (!(share > 0.0f)) return false;
+  const float uc = std::min(u * share, share * kOneMinusEpsilon);
+  group = std::min(
       static_cast<size_t>(std::upper_bound(m_groupCdf.begin(), m_groupCdf.begin() + long(count), uc) - m_groupCdf.begin()),
       count - 1);
-  float pmf = m_groupPmf[group] / share;
-  if (!(pmf > 0.0f)) return ls;
+  pmf = m_groupPmf[group] / share;
+  if (!(pmf > 0.0f)) return false;
   const float cdfBelow = group == 0 ? 0.0f : m_groupCdf[group - 1];
-  float ux = std::clamp((uc - cdfBelow) / m_groupPmf[group], 0.0f, kOneMinusEpsilon);
+  rescaled = std::clamp((uc - cdfBelow) / m_groupPmf[group], 0.0f, kOneMinusEpsilon);
+  return true;
+}
+
+LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout,
+                               const Vec3* normal) const {
+  LightSample ls;
+  size_t group;
+  float pmf, ux;
+  if (!chooseGroup(uChoice.x, withEnvironment, group, pmf, ux)) return ls;
   size_t idx;  // the light, in lightCount()'s order
   if (m_hasBounded && group == 0) {
     if (render.lightTree) {
@@ -180,8 +187,35 @@ LightSample Scene::sampleLight(const Vec3& ref, const Vec2& uChoice, bool withEn
   } else {
     idx = m_boundedPmf.size() + group - (m_hasBounded ? 1 : 0);
   }
+  return sampleChosen(ref, idx, pmf, Vec2(ux, uChoice.y), cosineAbout);
+}
+
+int Scene::sampleLights(const Vec3& ref, const Vec2& uChoice, bool withEnvironment, const Vec3* cosineAbout,
+                        const Vec3* normal, LightSample* out) const {
+  if (!splitting()) {
+    out[0] = sampleLight(ref, uChoice, withEnvironment, cosineAbout, normal);
+    return 1;
+  }
+  size_t group;
+  float pmf, ux;
+  if (!chooseGroup(uChoice.x, withEnvironment, group, pmf, ux)) {
+    out[0] = LightSample();
+    return 1;
+  }
+  if (!(m_hasBounded && group == 0)) {
+    out[0] = sampleChosen(ref, m_boundedPmf.size() + group - (m_hasBounded ? 1 : 0), pmf, Vec2(ux, uChoice.y), cosineAbout);
+    return 1;
+  }
+  LightTree::Choice choices[LightTree::kMaxChoices];
+  const int n = m_tree.sampleSplit(ref, normal, ux, splitAngle(), choices);
+  for (int i = 0; i < n; ++i)
+    out[i] = sampleChosen(ref, choices[i].light, pmf * choices[i].pmf, Vec2(choices[i].u, uChoice.y), cosineAbout);
+  return n;
+}
+
+LightSample Scene::sampleChosen(const Vec3& ref, size_t idx, float pmf, const Vec2& u, const Vec3* cosineAbout) const {
+  LightSample ls;
   if (!(pmf > 0.0f)) return ls;
-  const Vec2 u(ux, uChoice.y);
   if (idx < m_emissiveTris.size()) {
     // Uniform point on the emissive triangle, converted to a solid-angle density at ref.
     const uint32_t t = m_emissiveTris[idx];
@@ -302,7 +336,9 @@ float Scene::lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) c
   if (light >= m_lightCount) return 0.0f;
   const size_t bounded = m_boundedPmf.size();
   if (light >= bounded) return m_groupPmf[light - bounded + (m_hasBounded ? 1 : 0)];
-  return m_groupPmf[0] * (render.lightTree ? m_tree.pmf(ref, normal, uint32_t(light)) : m_boundedPmf[light]);
+  if (!render.lightTree) return m_groupPmf[0] * m_boundedPmf[light];
+  return m_groupPmf[0] *
+         (splitting() ? m_tree.pmfSplit(ref, normal, uint32_t(light), splitAngle()) : m_tree.pmf(ref, normal, uint32_t(light)));
 }
 
 float Scene::lightPdf(const Vec3& ref, const Vec3* normal, uint32_t triangle, const Vec3& lightPos,

@@ -340,6 +340,7 @@ private:
     const std::string lightSampler = r.string("light_sampler", s.lightTree ? "tree" : "power");
     if (lightSampler != "tree" && lightSampler != "power") r.fail("must be \"tree\" or \"power\", got \"" + lightSampler + "\"", "light_sampler");
     s.lightTree = lightSampler == "tree";
+    s.lightSplitDeg = r.number("light_split", s.lightSplitDeg, 0.0f, 90.0f);
     s.photons = static_cast<uint64_t>(r.integer("photons", static_cast<int64_t>(s.photons), 0, int64_t(1) << 36));
     s.causticPhotons =
         static_cast<uint64_t>(r.integer("caustic_photons", static_cast<int64_t>(s.causticPhotons), 0, int64_t(1) << 36));

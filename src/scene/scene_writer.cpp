@@ -313,6 +313,7 @@ void writeJsonScene(const Scene& scene, const std::string& jsonPath) {
   j["render"] = {{"width", s.width}, {"height", s.height}, {"spp", s.spp}, {"max_depth", s.maxDepth}, {"seed", s.seed},
                  {"method", s.method}, {"sampler", samplerNames()[size_t(s.sampler)]}};
   if (!s.lightTree) j["render"]["light_sampler"] = "power";
+  if (s.lightSplitDeg != RenderSettings().lightSplitDeg) j["render"]["light_split"] = s.lightSplitDeg;
   if (s.photons) j["render"]["photons"] = s.photons;
   if (s.causticPhotons) j["render"]["caustic_photons"] = s.causticPhotons;
   // Only the materials some triangle uses (a Mitsuba BSDF no shape names has no triangles).

@@ -813,10 +813,12 @@ TEST(MitsubaCornellBox, XmlRendersAsTheJsonSceneRegionByRegionWithPath) {
 
 TEST(MitsubaCornellBox, XmlRendersAsTheJsonSceneRegionByRegionWithVoxcone) {
   // voxcone's default method at 64 x 64, 64 spp, 200,000 photons: its photons and voxels follow
-  // the light's sampling too. Measured: largest cell deviation 2.5%, relMSE 5.3e-5
-  // (seed against seed: 37%, 3.8e-3).
+  // the light's sampling too. Measured: largest cell deviation 6.3%, relMSE 1.3e-4 (seed
+  // against seed: 24%, 1.2e-3); 5.3% before the photons' light choice was stratified (each
+  // photon's choice now follows its index, so the two splits of the light pair photons
+  // differently), 2.5% when this test was written.
   const CornellComparison c = compareCornell("voxcone", 64, 64, 200000);
-  EXPECT_LT(c.xmlVsJson.maxDeviation, 0.06);
+  EXPECT_LT(c.xmlVsJson.maxDeviation, 0.08);
   EXPECT_LT(c.xmlVsJson.relMse, 1e-3);
   EXPECT_LT(c.xmlVsJson.maxDeviation, 1.5 * c.seedVsSeed.maxDeviation);
   EXPECT_LT(c.xmlVsJson.relMse, 1.5 * c.seedVsSeed.relMse);

@@ -32,6 +32,7 @@ private:
   int m_maxDepth;
   int m_rrDepth = 3;
   bool m_nee = true;
+  int m_lightSamples = 1;  ///< light samples per vertex (stratified over the light choice)
 };
 
 }  // namespace voxcone

@@ -78,7 +78,7 @@ struct PhotonSettings {
 /// Statistics of one tracing run.
 struct PhotonStats {
   uint64_t emittedGlobal = 0, emittedCaustic = 0;
-  uint64_t storedGlobal = 0, storedCaustic = 0;
+  uint64_t storedGlobal = 0, storedCaustic = 0, storedGlossyCaustic = 0;
   Vec3 emittedPower{0.0f};   ///< total light flux (W per channel) every pass distributes
   double seconds = 0.0;
   nlohmann::json toJson() const;
@@ -91,6 +91,10 @@ struct PhotonStats {
 struct PhotonMaps {
   std::vector<Photon> global;
   std::vector<Photon> caustic;
+  /// The caustic pass's photons that arrived at a glossy surface (rough conductor, rough
+  /// dielectric) after specular bounces only, L S+ G: their first glossy hit, where the path
+  /// ends (albedo 0: the glossy surface's BSDF weighs them where it is shaded).
+  std::vector<Photon> glossyCaustic;
   /// With PhotonSettings::recordBins: the emission guide's bin each global photon left in.
   std::vector<uint32_t> globalBins;
   PhotonStats stats;

@@ -40,6 +40,21 @@ struct LightBounds {
 /// The bounds of two lights' bounds together.
 LightBounds unite(const LightBounds& a, const LightBounds& b);
 
+/// LightBounds as importance() reads them, with what it would otherwise recompute at every call
+/// (the box's bounding sphere, the cone's sine): the tree's nodes keep these.
+struct ImportanceBounds {
+  Vec3 centre{0.0f};
+  float r2 = 0.0f, r = 0.0f;  ///< the box's bounding sphere: radius squared, radius
+  Vec3 w{0.0f, 0.0f, 1.0f};
+  float phi = 0.0f;
+  float cosTheta_o = 1.0f, sinTheta_o = 0.0f, cosTheta_e = 0.0f;
+  bool twoSided = false;
+
+  static ImportanceBounds of(const LightBounds& b);
+  /// LightBounds::importance.
+  float importance(const Vec3& p, const Vec3* n) const;
+};
+
 class LightTree {
 public:
   LightTree() = default;
@@ -56,14 +71,38 @@ public:
   /// The probability that sample() at (p, n) chooses `light`.
   float pmf(const Vec3& p, const Vec3* n, uint32_t light) const;
 
+  /// One chosen light of sampleSplit: the light, the probability of choosing it within its
+  /// group, and u rescaled within its share (for the point on the light).
+  struct Choice {
+    uint32_t light = 0;
+    float pmf = 0.0f;
+    float u = 0.0f;
+  };
+  /// Most choices sampleSplit makes: it splits nodes down to depth kSplitDepth only.
+  static constexpr int kSplitDepth = 2;
+  static constexpr int kMaxChoices = 1 << kSplitDepth;
+  /// Adaptive splitting (Conty Estevez and Kulla 2018, sec. 5): the walk down sample() takes,
+  /// but at a node (of depth below kSplitDepth) that p sees too wide to trust one estimate of
+  /// (p inside its bounding sphere, or the sphere's angular radius above `splitAngle`,
+  /// radians) both children are walked, each a group of its own: the lights' estimates add up.
+  /// Writes up to kMaxChoices choices to `out`; returns how many. splitAngle >= pi/2: sample()'s
+  /// single choice (except from inside a node's sphere).
+  int sampleSplit(const Vec3& p, const Vec3* n, float u, float splitAngle, Choice* out) const;
+  /// The probability that sampleSplit at (p, n) chooses `light` within its group.
+  float pmfSplit(const Vec3& p, const Vec3* n, uint32_t light, float splitAngle) const;
+
 private:
   struct Node {
+    ImportanceBounds ib;      ///< what sample() and pmf() read
     LightBounds lb;
     uint32_t parent = UINT32_MAX;
     uint32_t second = 0;      ///< internal: the second child (the first is the next node)
     uint32_t light = 0;       ///< leaf: the light
+    uint8_t depth = 0;        ///< the root's is 0
     bool leaf = false;
   };
+  /// Does sampleSplit walk both children of `node` at p?
+  bool splits(const Node& node, const Vec3& p, float sinSplit2) const;
   uint32_t build(std::vector<uint32_t>& idx, size_t begin, size_t end, const std::vector<LightBounds>& lights,
                  uint32_t parent);
 

@@ -69,6 +69,8 @@ struct RenderSettings {
   /// How lights are chosen for a shading point: by a light tree (their estimated contribution
   /// there, the default) or in proportion to their power alone ("power", for comparisons).
   bool lightTree = true;
+  /// The light tree's split angle in degrees (LightTree::sampleSplit; 0: one light per sample).
+  float lightSplitDeg = 0.0f;
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };
@@ -181,6 +183,15 @@ public:
   /// escapedPdf is the pdf without it.
   LightSample sampleLight(const Vec3& ref, const Vec2& u, bool withEnvironment = true,
                           const Vec3* cosineAbout = nullptr, const Vec3* normal = nullptr) const;
+  /// Light samples towards `ref` with one 2D sample, as sampleLight takes them but with the light
+  /// tree's adaptive splitting (LightTree::sampleSplit, render.lightSplitDeg > 0): where the
+  /// bounded lights are chosen, up to LightTree::kMaxChoices of them, one from each group the
+  /// tree splits into at ref, each sample's pdf that of its own group's choice (their
+  /// estimates add up). Writes them to `out` (room for kMaxChoices); returns how many (one
+  /// without splitting: sampleLight's). lightPdf and lightChoicePmf give these probabilities
+  /// while splitting is on.
+  int sampleLights(const Vec3& ref, const Vec2& u, bool withEnvironment, const Vec3* cosineAbout, const Vec3* normal,
+                   LightSample* out) const;
   /// The environment's own sample, as sampleLight draws it once it has chosen the environment
   /// (`cosineAbout` likewise), its pdf the direction's alone (no choice among the lights); no
   /// sample without an environment.
@@ -194,6 +205,11 @@ public:
   float lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) const;
   /// Choose lights by the tree (true) or by power alone (false) from now on.
   void setLightTree(bool on) { render.lightTree = on; }
+  /// The tree's split angle (degrees; 0: no splitting) from now on.
+  void setLightSplit(float degrees) { render.lightSplitDeg = degrees; }
+  /// Does sampleLights split (the tree chooses, with a split angle)?
+  bool splitting() const { return render.lightTree && render.lightSplitDeg > 0.0f; }
+  float splitAngle() const { return render.lightSplitDeg * (kPi / 180.0f); }  ///< radians
   /// Radiance arriving along a ray that leaves the scene in direction `dir` (unit): the
   /// environment's and that of every finite sun whose disc it meets; zero without them.
   Vec3 escaped(const Vec3& dir) const;
@@ -229,6 +245,11 @@ private:
   bool m_hasBounded = false;
   size_t m_lightCount = 0;
   LightTree m_tree;                        ///< over the bounded lights
+  /// Choose a light group (the bounded lights, each directional light, the environment) by
+  /// power with u: the group, its probability and u rescaled within its share.
+  bool chooseGroup(float u, bool withEnvironment, size_t& group, float& pmf, float& rescaled) const;
+  /// The sample of light idx (lightCount()'s order), chosen with probability pmf, at point u.
+  LightSample sampleChosen(const Vec3& ref, size_t idx, float pmf, const Vec2& u, const Vec3* cosineAbout) const;
   std::vector<float> m_boundedCdf;         ///< by power among the bounded lights (no tree)
   std::vector<float> m_boundedPmf;
   std::vector<int32_t> m_triLightIndex;    ///< per triangle: light index or -1

@@ -90,7 +90,7 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
 }
 
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,
-                                  int depth) const {
+                                  int depth, Vec3* deltaLight) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   Material textured;
   const Material& m = m_scene.materialAt(sh, textured);
@@ -102,7 +102,10 @@ Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tan
     if (maxComponent(lobes[i].weight) < kSpecularCut) continue;
     const Vec3 wi = frame.toWorld(lobes[i].wi);
     const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
-    L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, lightU, depth + 1);
+    Vec3 found(0.0f);
+    L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, lightU, depth + 1, false, nullptr,
+                                 deltaLight ? &found : nullptr);
+    if (deltaLight) *deltaLight += lobes[i].weight * found;
   }
   return L;
 }
@@ -131,7 +134,8 @@ Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2&
 }
 
 Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
-                       const Vec2& lightU, int depth, bool sky) const {
+                       const Vec2& lightU, int depth, bool sky, std::optional<SurfaceHit>* axisHit,
+                       Vec3* deltaLight) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -151,9 +155,16 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
   if (m_hitGather) {
     // One exact ray along the axis; the radiance at its hit, filtered over the cone's width there.
     const std::optional<AxisHit> hit = hitAlongAxis(p, pError, n, d, m_maxDistance);
-    if (!hit) return sky ? m_scene.escapedSky(d) : Vec3(0.0f);
+    if (axisHit) *axisHit = hit ? std::optional<SurfaceHit>(hit->surface) : std::nullopt;
+    // Past a mirror or glass (depth > 0), what a glossy cone's light samples cannot reach.
+    const bool throughDelta = deltaLight && depth > 0;
+    if (!hit) {
+      if (throughDelta) *deltaLight += m_scene.escaped(d);
+      return sky ? m_scene.escapedSky(d) : Vec3(0.0f);
+    }
     const Material& hm = m_scene.materials[hit->surface.material];
-    if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth);
+    if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth, deltaLight);
+    if (throughDelta) *deltaLight += m_scene.emitted(hit->surface, -d);
     if (m_photons && !hm.hasDiffuseBase()) return continueGlossy(hit->surface, d, lightU, depth);
     return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU);
   }

@@ -8,6 +8,7 @@
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/integrator.h"
+#include "voxcone/scene/bsdf.h"
 
 #include "../../support/render_helpers.h"
 #include "../../support/test_scenes.h"
@@ -15,6 +16,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cstdio>
 #include <fstream>
 
 namespace voxcone {
@@ -490,13 +492,67 @@ TEST(VoxelCone, ARoughMetalBlockPassesItsLightOnInEveryRegion) {
   EXPECT_NEAR(mean, 1.0, 0.03);
 }
 
+/// Directional albedo of `m` at local wo: the integral of f cos over the sphere of wi, by the
+/// midpoint rule in (cos theta, phi) (cos theta from -1: a dielectric's transmission too).
+double directionalAlbedo(const Material& m, const Vec3& wo) {
+  constexpr int kTheta = 1600, kPhi = 400;
+  double sum = 0.0;
+  for (int i = 0; i < kTheta; ++i) {
+    const double c = -1.0 + 2.0 * (i + 0.5) / kTheta, sinT = std::sqrt(std::max(0.0, 1.0 - c * c));
+    for (int j = 0; j < kPhi; ++j) {
+      const double phi = 2.0 * kPi * (j + 0.5) / kPhi;
+      const Vec3 wi(float(sinT * std::cos(phi)), float(sinT * std::sin(phi)), float(c));
+      sum += double(luminance(bsdfEval(m, wo, wi))) * std::fabs(c);
+    }
+  }
+  return sum * (2.0 / kTheta) * (2.0 * kPi / kPhi);
+}
+
+TEST(VoxelCone, ARoughConductorInAFurnaceReflectsItsAlbedoIntegral) {
+  // A 0.2 x 0.2 rough-aluminium plate at the centre of a closed sphere of radius 1 whose wall
+  // (albedo 0.5) emits 1 on both sides: the wall's radiance is 1 / (1 - 0.5) = 2 (the plate,
+  // 0.3% of the wall's area, changes it by less than that), so the plate reflects 2 A(wo), A
+  // its directional albedo, half of it from the lights by shadow rays and half through the
+  // glossy cones (the photons' bounced light on the wall plus the light at each cone's hit). A
+  // narrow camera at 40 degrees from the plate's normal: every pixel sees it at nearly one wo.
+  // Roughness 0.05 (one ray), 0.25 and 0.6 (4 cones each). Bound: 2% of 2 A, against A by
+  // quadrature of the BSDF; path the same within 2%, as a check of the set-up. Measured at 16
+  // spp: voxcone 0.04%, 0.3%, 0.4% low, path 0.4% high, 0.02% low, 1.5% high; before the cones'
+  // emission was MIS-weighted against the light samples, roughness 0.05 was 3.3% low.
+  for (double roughness : {0.05, 0.25, 0.6}) {
+    const double theta = 40.0 * kPi / 180.0;
+    const Vec3 eye(float(0.5 * std::sin(theta)), 0.0f, float(0.5 * std::cos(theta)));
+    nlohmann::json j;
+    j["camera"] = {{"position", {eye.x, eye.y, eye.z}}, {"target", {0, 0, 0}}, {"up", {0, 1, 0}}, {"fov_y_deg", 8}};
+    j["render"] = {{"width", 16}, {"height", 16}, {"spp", 16}, {"max_depth", 64}};
+    j["materials"]["wall"] = {{"type", "lambertian"}, {"albedo", 0.5}, {"emission", 1.0}, {"two_sided_emission", true}};
+    j["materials"]["metal"] = {{"type", "rough_conductor"}, {"eta", {1.657, 0.880, 0.521}},
+                               {"k", {9.224, 6.270, 4.837}}, {"roughness", roughness}};
+    j["shapes"].push_back({{"type", "sphere"}, {"center", {0, 0, 0}}, {"radius", 1}, {"subdivisions", 4}, {"material", "wall"}});
+    j["shapes"].push_back({{"type", "quad"}, {"material", "metal"},
+                           {"vertices", {{-0.1, -0.1, 0}, {0.1, -0.1, 0}, {0.1, 0.1, 0}, {-0.1, 0.1, 0}}}});
+    const Scene scene = parseScene(j.dump(), "conductor-furnace", ".");
+    Material metal;
+    for (const Material& m : scene.materials)
+      if (m.type == MaterialType::RoughConductor) metal = m;
+    const double expected = 2.0 * directionalAlbedo(metal, Vec3(float(std::sin(theta)), 0.0f, float(std::cos(theta))));
+    for (const char* method : {"voxcone", "path"}) {
+      const Vec3 m = imageMean(renderWith(scene, method, scene.render, nlohmann::json::object()).image);
+      const double lum = luminance(m);
+      std::printf("roughness %.2f %s: %.4f, 2 A(wo) = %.4f\n", roughness, method, lum, expected);
+      EXPECT_NEAR(lum / expected, 1.0, 0.02) << method << " roughness " << roughness;
+    }
+  }
+}
+
 TEST(VoxelCone, BadOptionsAreSettingsErrors) {
   const Scene scene = test::furnaceScene(0.5f, 1.0f, 0.0f, 2, 1);
   const Hbvh accel(scene);
   for (const char* bad : {R"({"cones": 0})", R"({"level": 13})", R"({"view": "nope"})", R"({"unknown": 1})",
                           R"({"cone_angle": -1})", R"({"coarsest_level": 9, "level": 8})",
                           R"({"gather_spacing": 2, "filter": 0})", R"({"gather_spacing": 0})",
-                          R"({"photon_guide": -0.1})", R"({"photon_guide": 1.5})", R"({"photon_guide": "yes"})"}) {
+                          R"({"photon_guide": -0.1})", R"({"photon_guide": 1.5})", R"({"photon_guide": "yes"})",
+                          R"({"glossy_cones": 0})", R"({"glossy_cones": 65})", R"({"glossy_switch": 0})"}) {
     IntegratorContext ctx{scene, accel, scene.render, nlohmann::json::parse(bad)};
     EXPECT_THROW(createIntegrator("voxcone", ctx), SettingsError) << bad;
   }

@@ -60,8 +60,14 @@ public:
   /// kMaxSpecularDepth); at a glossy surface, continueGlossy's. `lightU`: the 2D sample of the light at the hit (hitDirect).
   /// With `sky`, a cone whose exact axis ray leaves the scene takes the environment's radiance
   /// along it (the caller leaves the environment out of its shadow rays); else nothing.
+  /// With `axisHit` (gather = hit only), the surface the axis ray meets first, or nullopt where it
+  /// leaves the scene (the caller's MIS of emission found by BSDF sampling). With `deltaLight`
+  /// (gather = hit only), the emission (and sky) the axis finds through mirrors and glass is
+  /// added there, weighted by their lobes: a glossy surface's view of a light in a mirror (L S G,
+  /// which neither its light samples nor the caustic photons, stored at diffuse surfaces, carry).
   Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, const Vec2& lightU,
-             int depth = 0, bool sky = false) const;
+             int depth = 0, bool sky = false, std::optional<SurfaceHit>* axisHit = nullptr,
+             Vec3* deltaLight = nullptr) const;
   float finestVoxel() const { return m_v0; }  ///< world units
   /// Per-axis variance of a cone's cross-section at unit distance along its axis, for
   /// directions uniform over its solid angle (half-angle atan(tanHalf)).
@@ -77,7 +83,8 @@ private:
     Vec3 side{0.0f};
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
-  Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU, int depth) const;
+  Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU, int depth,
+                        Vec3* deltaLight = nullptr) const;
   /// The light a cone of direction d passes on at glossy surface sh (neither delta nor diffuse:
   /// no photon estimate there): its direct light by one shadow ray and one cone along a
   /// direction its BSDF samples, as wide as its roughness (counted as a specular hit).

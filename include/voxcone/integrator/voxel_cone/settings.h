@@ -39,6 +39,8 @@ struct VoxelConeSettings {
   double guideFloor = 0.0;
   int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
   int chainCones = 8;           ///< cones per gather behind mirrors and glass (default 8 with "hit", `cones` with "march")
+  int glossyCones = 4;          ///< most cones over one glossy lobe, [1, 64]
+  float glossySwitch = 0.1f;    ///< roughness of a lobe one ray covers (fewer cones below: glossyLobeCones)
   /// `glint_samples`: samples per camera sample of the light seen through mirrors and glass, in
   /// the pixels that see them (Integrator::glintSamples); default 16 where the scene has a
   /// mirror or glass, else 0.

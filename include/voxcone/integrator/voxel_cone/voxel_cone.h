@@ -28,8 +28,16 @@
 ///    gather's cones), the photons only what bounced: photons straight from a light made the
 ///    sharpest part of the hit's light a blurred estimate (a knot's contact shadow on
 ///    small-objects came out lit; relMSE 0.00185 -> 0.00098);
-///  - glossy surfaces: one cone along a BSDF-sampled direction, weight f cos / pdf, whose
-///    half-angle is atan(roughness).
+///  - glossy surfaces (and a rough coat's glossy layer): n cones over strata of equal
+///    probability of the lobe (a shifted Hammersley set through the BSDF's sampling map), each
+///    weighted f cos / (n pdf), with n = ceil((roughness / glossy_switch)^2) up to
+///    `glossy_cones`: one exact ray for a lobe at most glossy_switch rough. A cone's half-angle
+///    is atan(roughness) (for the march). With gather = hit the lights the cones' axes meet
+///    count too, and the glossy surface's light samples and they are weighted by the power
+///    heuristic (multi-sample MIS). Caustics on a glossy surface (L S+ G: a light seen in a
+///    mirror) come from the caustic pass's photons that ended there (PhotonMaps::glossyCaustic;
+///    a density estimate weighted by the BSDF), or, without a caustic pass, from the cones
+///    through mirrors and glass.
 ///
 /// A cone of half-angle theta is marched front to back. Each sample is a filtered lookup whose
 /// footprint has the variance of the cone's cross-section: directions uniform over the cone's
@@ -80,6 +88,8 @@
 ///  - `cones` [1, 256] (default 32 with gather = hit, 6 with march), `cone_angle` (half-angle
 ///    in degrees, default from the count: acos(1 - 1/N)), `cone_step` (0.25-4, default 1),
 ///    `max_distance` (world units, default: the scene's bounding-sphere diameter);
+///  - `glossy_cones` [1, 64] (default 4), `glossy_switch` (roughness, default 0.1): cones over
+///    a glossy lobe, as above;
 ///  - `chain_cones` [1, 256]: cones of a gather at a hit seen through mirrors and glass, which
 ///    cannot wait for the screen-space filter and gathers at every pixel (default 8 with gather
 ///    = hit, `cones` with march; the glass dragon took 13.6 s with 32);
@@ -131,6 +141,8 @@
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
+#include "voxcone/photon/photon_kdtree.h"
+#include "voxcone/photon/photon_tracer.h"
 #include "voxcone/voxel/voxel_field.h"
 
 #include <optional>
@@ -171,6 +183,20 @@ private:
   /// (the chain's set, `chain_cones`, at a hit behind mirrors and glass).
   /// `untextured`: a textured albedo taken as 1 (IndirectSplit::albedo multiplies it back).
   Vec3 gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorld, float u, bool chain = false, bool untextured = false) const;
+  /// The light a glossy lobe gathers at sh (a rough conductor's or dielectric's, or with `coat`
+  /// a rough coat's alone): glossyLobeCones(roughness) cones over strata of the lobe. With
+  /// `emission` (gather = hit), the emission the cones' axes find there, MIS-weighted against
+  /// the light samples (misWeightedEmission); with `caustic` (gather = hit), the light they find
+  /// through mirrors and glass (ConeTracer::trace's deltaLight).
+  Vec3 gatherLobe(const SurfaceHit& sh, const Frame& frame, const Vec3& wo, const Material& mat, Sampler& sampler,
+                  bool coat, Vec3* emission, Vec3* caustic) const;
+  /// Caustics (L S+ G) at glossy hit sh seen from local wo: the glossy caustic photons'
+  /// density estimate, sum f(wo, wi_p) power_p / (pi r^2) over the hit_photons nearest within
+  /// hit_radius that arrived on the viewer's side (ng) of a surface of the same orientation.
+  Vec3 glossyCausticRadiance(const SurfaceHit& sh, const Frame& frame, const Vec3& wo, const Material& mat,
+                             const Vec3& ng) const;
+  /// Cones over a lobe of this roughness: ceil((roughness / glossy_switch)^2), 1 to glossy_cones.
+  int glossyLobeCones(float roughness) const;
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
   /// hit goes there instead (with the hit's position, normal and material). With `terms`, its
   /// direct, caustic and indirect parts are added there, times `weight` (the delta chain's);
@@ -199,6 +225,9 @@ private:
 
   VoxelField m_field;
   PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
+  std::vector<Photon> m_glossyCaustic;  ///< caustic photons on glossy surfaces (PhotonMaps::glossyCaustic)
+  PhotonKdTree m_glossyCausticTree;     ///< over their positions
+  bool m_glossyCausticByPhotons = false;  ///< L S+ G from those photons (else from the cones, trace's deltaLight)
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
   nlohmann::json m_stats = nlohmann::json::object();
