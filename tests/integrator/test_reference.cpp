@@ -224,11 +224,11 @@ struct ManyLights {
   std::vector<std::vector<DVec3>> down;  // the polygons facing the plane
   std::vector<DVec3> radiance;
 };
-ManyLights planeUnderLights(int n, const PlaneFrame& f, const std::string& sampler) {
+ManyLights planeUnderLights(int n, const PlaneFrame& f, const std::string& sampler, double splitDeg) {
   nlohmann::json j;
   j["camera"] = {{"position", jsonPoint(f.world(0, 0, 200))}, {"target", jsonPoint(f.world(0, 0, 0))},
                  {"up", jsonPoint(f.world(1, 0, 0) - f.world(0, 0, 0))}, {"fov_y_deg", 90}};
-  j["render"] = {{"width", 8}, {"height", 8}, {"spp", 1}, {"light_sampler", sampler}};
+  j["render"] = {{"width", 8}, {"height", 8}, {"spp", 1}, {"light_sampler", sampler}, {"light_split", splitDeg}};
   j["materials"]["white"] = {{"type", "lambertian"}, {"albedo", kAlbedo}};
   nlohmann::json plane = {{"type", "quad"}, {"name", "plane"}, {"material", "white"}};
   for (const DVec3& p : {f.world(-300, -300, 0), f.world(300, -300, 0), f.world(300, 300, 0), f.world(-300, 300, 0)})
@@ -266,6 +266,7 @@ ManyLights planeUnderLights(int n, const PlaneFrame& f, const std::string& sampl
 struct ManyLightsCase {
   std::string method;
   std::string sampler;
+  double splitDeg = 0.0;  ///< the tree's split angle (0: none)
 };
 class DirectLightFromNLights : public ::testing::TestWithParam<ManyLightsCase> {};
 
@@ -274,12 +275,13 @@ TEST_P(DirectLightFromNLights, EqualsTheSumOfEachLightsClosedForm) {
   // direct light against sum_i albedo / pi * L_i * E_i (Lambert's formula per light), each
   // colour channel. Bound: 1% for 1 and 16 lights; for 256, where one sample sees one light,
   // 1.5% choosing by the tree and 3% by power (measured largest errors, printed: 0.004%, 0.35%,
-  // 0.79% tree; 0.004%, 0.26%, 1.85% power).
+  // 0.79% tree; 0.004%, 0.26%, 1.85% power; the tree splitting at 10 degrees, up to 16 lights
+  // a sample: 0.004%, 0.04%, 0.07%).
   const ManyLightsCase c = GetParam();
   for (int n : {1, 16, 256}) {
     double worst = 0.0;
     for (const PlaneFrame f : {PlaneFrame{1, 0.0}, PlaneFrame{0, 1e3}}) {
-      const ManyLights m = planeUnderLights(n, f, c.sampler);
+      const ManyLights m = planeUnderLights(n, f, c.sampler, c.splitDeg);
       const Hbvh accel(m.scene);
       RenderSettings settings = m.scene.render;
       settings.maxDepth = 2;
@@ -311,21 +313,26 @@ TEST_P(DirectLightFromNLights, EqualsTheSumOfEachLightsClosedForm) {
           for (int ch = 0; ch < 3; ++ch) {
             const double rel = std::fabs(sum[ch] / kSamples / exact[ch] - 1.0);
             worst = std::max(worst, rel);
-            EXPECT_LT(rel, n < 256 ? 0.01 : c.sampler == "tree" ? 0.015 : 0.03) << c.method << " " << c.sampler << ", " << n << " lights, axis "
+            EXPECT_LT(rel, n < 256 ? 0.01 : c.sampler == "tree" ? 0.015 : 0.03) << c.method << " " << c.sampler << " split "
+                                                 << c.splitDeg << ", " << n << " lights, axis "
                                                  << f.axis << " at (" << u << ", " << v << ") channel " << ch << ": "
                                                  << sum[ch] / kSamples << " vs exact " << exact[ch];
           }
         }
     }
-    std::printf("%s, %s sampler, %d lights: largest relative error %.2e\n", c.method.c_str(), c.sampler.c_str(), n,
-                worst);
+    std::printf("%s, %s sampler, split %g: %d lights: largest relative error %.2e\n", c.method.c_str(),
+                c.sampler.c_str(), c.splitDeg, n, worst);
   }
 }
 
 INSTANTIATE_TEST_SUITE_P(Reference, DirectLightFromNLights,
                          ::testing::Values(ManyLightsCase{"whitted", "tree"}, ManyLightsCase{"path", "tree"},
+                                           ManyLightsCase{"whitted", "tree", 10.0}, ManyLightsCase{"path", "tree", 10.0},
                                            ManyLightsCase{"whitted", "power"}, ManyLightsCase{"path", "power"}),
-                         [](const auto& info) { return info.param.method + "_" + info.param.sampler; });
+                         [](const auto& info) {
+                           return info.param.method + "_" + info.param.sampler +
+                                  (info.param.splitDeg > 0.0 ? "_split" : "");
+                         });
 
 // ---------------------------------------------------------------------------------------------
 // The Cornell box, region by region

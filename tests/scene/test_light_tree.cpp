@@ -220,5 +220,42 @@ TEST(LightTree, IndependentSamplesPassAChiSquareTestAgainstThePmf) {
   }
 }
 
+TEST(LightTree, SplitChoicesReportTheirGroupsPmfAndGiveEveryLightItsShare) {
+  // With splitting each choice's probability is its own group's, which pmfSplit recomputes;
+  // each light lies in exactly one group, whose walk down keeps a stratified set of numbers
+  // stratified: over M evenly spaced numbers every light is chosen pmfSplit * M times, give or
+  // take one (so sum over choices of g(light) / pmf estimates sum over lights of g, whatever g).
+  // Splitting at 0.2, 0.8 and pi/2 rad (there only nodes whose sphere holds the point split).
+  const LightSet set = randomLights(256, 41);
+  const LightTree tree(set.bounds);
+  constexpr int kM = 4096;
+  for (const float angle : {0.2f, 0.8f, 1.5708f}) {
+    int most = 0;
+    for (const auto& [p, nrm] : shadingPoints(24, 43)) {
+      std::vector<int> count(set.lights.size(), 0);
+      for (int i = 0; i < kM; ++i) {
+        LightTree::Choice c[LightTree::kMaxChoices];
+        const int n = tree.sampleSplit(p, &nrm, (float(i) + 0.5f) / float(kM), angle, c);
+        ASSERT_LE(n, LightTree::kMaxChoices);
+        most = std::max(most, n);
+        for (int k = 0; k < n; ++k) {
+          ASSERT_GT(c[k].pmf, 0.0f);
+          EXPECT_NEAR(c[k].pmf, tree.pmfSplit(p, &nrm, c[k].light, angle), 1e-5f * c[k].pmf);
+          EXPECT_GE(c[k].u, 0.0f);
+          EXPECT_LT(c[k].u, 1.0f);
+          ++count[c[k].light];
+        }
+      }
+      for (size_t l = 0; l < count.size(); ++l) {
+        const double expected = double(tree.pmfSplit(p, &nrm, uint32_t(l), angle)) * kM;
+        EXPECT_LE(std::fabs(count[l] - expected), 1.01) << "light " << l << " angle " << angle;
+        if (set.bounds[l].importance(p, &nrm) > 0.0f) EXPECT_GT(expected, 0.0) << "light " << l;
+      }
+    }
+    std::printf("split angle %.2f rad: at most %d choices\n", angle, most);
+    EXPECT_GT(most, 1);  // every point lies inside the root's sphere at least
+  }
+}
+
 }  // namespace
 }  // namespace voxcone

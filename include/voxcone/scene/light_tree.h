@@ -79,7 +79,7 @@ public:
     float u = 0.0f;
   };
   /// Most choices sampleSplit makes: it splits nodes down to depth kSplitDepth only.
-  static constexpr int kSplitDepth = 2;
+  static constexpr int kSplitDepth = 4;
   static constexpr int kMaxChoices = 1 << kSplitDepth;
   /// Adaptive splitting (Conty Estevez and Kulla 2018, sec. 5): the walk down sample() takes,
   /// but at a node (of depth below kSplitDepth) that p sees too wide to trust one estimate of

@@ -70,7 +70,13 @@ struct RenderSettings {
   /// there, the default) or in proportion to their power alone ("power", for comparisons).
   bool lightTree = true;
   /// The light tree's split angle in degrees (LightTree::sampleSplit; 0: one light per sample).
-  float lightSplitDeg = 0.0f;
+  /// Measured on many-lights (256x256, 16 spp, 2 threads, against path at 4096 spp), splitting
+  /// to depth 4 (up to 16 light samples): path 26.1 dB in 1.8 s without, 29.3 / 29.7 / 30.2 dB
+  /// in 2.95 / 3.19 / 3.60 s at 75 / 60 / 45 degrees (depth 3 at 45: 29.5 dB in 3.5 s; depth 5:
+  /// 30.3 dB in 4.0 s); voxcone 31.3 dB in 1.35 s without, 37.2 / 38.0 / 39.3 dB in 1.33 / 1.39
+  /// / 1.52 s at 75 / 60 / 45 degrees. Path without splitting reaches 30.2 dB at about 38 spp,
+  /// 4.2 s (between its 26.1 dB at 16 spp and 32.7 dB at 64 spp, 6.6 s).
+  float lightSplitDeg = 45.0f;
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };
