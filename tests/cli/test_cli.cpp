@@ -320,6 +320,22 @@ TEST(Cli, SamplerIsChosenAndRecorded) {
   EXPECT_NE(a.pixels, b.pixels);
 }
 
+TEST(Cli, LightSplitIsChosenAndRecorded) {
+  // --light-split sets the tree's split angle and the sidecar records it; on many-lights
+  // splitting changes the image (more light samples where lights are near), and 0 is the
+  // tree's single choice.
+  const fs::path d = freshDir("cli_light_split");
+  const std::string scene = test::sourceDir() + "/data/scenes/failure/many-lights.json";
+  for (const char* split : {"0", "45"}) {
+    const RunResult r = run("render " + scene + " --method path -q --res 16x16 --spp 2 --light-split " + split + " -o " +
+                            (d / split).string());
+    ASSERT_EQ(r.code, 0) << r.err;
+    std::ifstream f(d / (std::string(split) + ".json"));
+    EXPECT_EQ(nlohmann::json::parse(f)["settings"]["light_split"].get<double>(), std::stod(split));
+  }
+  EXPECT_NE(readImage((d / "0.exr").string()).pixels, readImage((d / "45.exr").string()).pixels);
+}
+
 TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   const fs::path d = freshDir("cli_bad");
   const std::string scenes = test::sourceDir() + "/data/scenes/";
@@ -340,6 +356,9 @@ TEST(Cli, BadInputGivesOneLineAndNoOutput) {
       "render " + scenes + "cornell-box.json -q --res banana -o " + (d / "f").string(),
       "render " + scenes + "cornell-box.json -q --options '{\"x\":1}' -o " + (d / "g").string(),
       "render " + scenes + "cornell-box.json -q --sampler halton -o " + (d / "h").string(),
+      "render " + scenes + "cornell-box.json -q --light-sampler bvh -o " + (d / "h2").string(),
+      "render " + scenes + "cornell-box.json -q --light-split 91 -o " + (d / "h3").string(),
+      "render " + scenes + "cornell-box.json -q --light-split -5 -o " + (d / "h4").string(),
       "render " + scenes + "cornell-box.json -q -o /nonexistent-dir/x",
       // Not clamped to 2^63 - 1, not taken as "not given".
       "render " + scenes + "cornell-box.json -q --seed 99999999999999999999 -o " + (d / "i").string(),

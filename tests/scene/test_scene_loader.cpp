@@ -76,6 +76,9 @@ TEST(SceneLoader, BadInputNamesTheKeyPath) {
       {replaced(m, "\"camera\"", "\"render\": {\"spp\": 0}, \"camera\""), "render.spp: value 0 out of range"},
       {replaced(m, "\"camera\"", "\"render\": {\"width\": 1.5}, \"camera\""), "render.width: expected an integer"},
       {replaced(m, "\"camera\"", "\"render\": {\"sampler\": \"halton\"}, \"camera\""), "render.sampler: unknown sampler 'halton'"},
+      {replaced(m, "\"camera\"", "\"render\": {\"light_sampler\": \"bvh\"}, \"camera\""), "render.light_sampler: must be"},
+      {replaced(m, "\"camera\"", "\"render\": {\"light_split\": 91}, \"camera\""), "render.light_split: value 91 out of range"},
+      {replaced(m, "\"camera\"", "\"render\": {\"light_split\": -1}, \"camera\""), "render.light_split: value -1 out of range"},
       {replaced(m, "\"target\": [0, 0, 0]", "\"target\": [0, 0, -5]"), "camera.target: target equals position"},
       {replaced(m, "\"materials\"", "\"extra\": {}, \"materials\""), "extra: unknown key"},
   };
@@ -84,6 +87,21 @@ TEST(SceneLoader, BadInputNamesTheKeyPath) {
     EXPECT_NE(err.find("test.json"), std::string::npos) << err;
     EXPECT_NE(err.find(c.expect), std::string::npos) << "expected '" << c.expect << "' in: " << err;
   }
+}
+
+TEST(SceneLoader, LightSamplerAndSplitAngle) {
+  const Scene d = parseScene(kMinimal, "test.json", ".");
+  EXPECT_TRUE(d.render.lightTree);
+  EXPECT_EQ(d.render.lightSplitDeg, 45.0f);
+  EXPECT_TRUE(d.splitting());
+  const Scene s = parseScene(replaced(kMinimal, "\"camera\"", "\"render\": {\"light_split\": 0}, \"camera\""), "test.json", ".");
+  EXPECT_FALSE(s.splitting());
+  const Scene p = parseScene(
+      replaced(kMinimal, "\"camera\"", "\"render\": {\"light_sampler\": \"power\", \"light_split\": 20}, \"camera\""),
+      "test.json", ".");
+  EXPECT_FALSE(p.render.lightTree);
+  EXPECT_EQ(p.render.lightSplitDeg, 20.0f);
+  EXPECT_FALSE(p.splitting());  // splitting is the tree's
 }
 
 TEST(SceneLoader, MissingFileIsAnError) {
