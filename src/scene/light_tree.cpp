@@ -204,43 +204,52 @@ uint32_t LightTree::build(std::vector<uint32_t>& idx, size_t begin, size_t end, 
   return self;
 }
 
+uint32_t LightTree::descend(uint32_t i, const Vec3& p, const Vec3* n, float& u, float& pmf) const {
+  const uint32_t c0 = i + 1, c1 = m_nodes[i].second;
+  const float p0 = firstChildProbability(i, p, n);
+  if (!(p0 >= 0.0f)) return UINT32_MAX;
+  if (u < p0) {
+    u = std::min(u / p0, kOneMinusEpsilon);
+    pmf *= p0;
+    return c0;
+  }
+  u = std::min((u - p0) / (1.0f - p0), kOneMinusEpsilon);
+  pmf *= 1.0f - p0;
+  return c1;
+}
+
+float LightTree::firstChildProbability(uint32_t i, const Vec3& p, const Vec3* n) const {
+  const float i0 = m_nodes[i + 1].ib.importance(p, n), i1 = m_nodes[m_nodes[i].second].ib.importance(p, n);
+  const float sum = i0 + i1;
+  return sum > 0.0f ? i0 / sum : -1.0f;
+}
+
 bool LightTree::sample(const Vec3& p, const Vec3* n, float& u, uint32_t& light, float& pmf) const {
   if (m_nodes.empty()) return false;
   uint32_t i = 0;
   pmf = 1.0f;
   while (!m_nodes[i].leaf) {
-    const uint32_t c0 = i + 1, c1 = m_nodes[i].second;
-    const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
-    const float sum = i0 + i1;
-    if (!(sum > 0.0f)) return false;
-    const float p0 = i0 / sum;
-    if (u < p0) {
-      u = std::min(u / p0, kOneMinusEpsilon);
-      pmf *= p0;
-      i = c0;
-    } else {
-      u = std::min((u - p0) / (1.0f - p0), kOneMinusEpsilon);
-      pmf *= 1.0f - p0;
-      i = c1;
-    }
+    i = descend(i, p, n, u, pmf);
+    if (i == UINT32_MAX) return false;
   }
   light = m_nodes[i].light;
   return pmf > 0.0f;
 }
 
-float LightTree::pmf(const Vec3& p, const Vec3* n, uint32_t light) const {
+float LightTree::pmf(const Vec3& p, const Vec3* n, uint32_t light) const { return pmfUp(p, n, light, false, 0.0f); }
+
+float LightTree::pmfUp(const Vec3& p, const Vec3* n, uint32_t light, bool split, float sinSplit2) const {
   if (light >= m_leafOf.size() || m_leafOf[light] == UINT32_MAX) return 0.0f;
   float pmf = 1.0f;
   uint32_t i = m_leafOf[light];
   while (m_nodes[i].parent != UINT32_MAX) {
     const uint32_t parent = m_nodes[i].parent;
-    const uint32_t c0 = parent + 1, c1 = m_nodes[parent].second;
-    const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
-    const float sum = i0 + i1;
-    if (!(sum > 0.0f)) return 0.0f;
-    // The same arithmetic as sample()'s choice.
-    const float p0 = i0 / sum;
-    pmf *= i == c0 ? p0 : 1.0f - p0;
+    if (!(split && splits(m_nodes[parent], p, sinSplit2))) {
+      // The same arithmetic as descend's choice.
+      const float p0 = firstChildProbability(parent, p, n);
+      if (!(p0 >= 0.0f)) return 0.0f;
+      pmf *= i == parent + 1 ? p0 : 1.0f - p0;
+    }
     i = parent;
   }
   return pmf;
@@ -254,9 +263,13 @@ bool LightTree::splits(const Node& node, const Vec3& p, float sinSplit2) const {
   return dist2 <= node.ib.r2 || node.ib.r2 > sinSplit2 * dist2;
 }
 
+namespace {
+float sinSquared(float splitAngle) { return splitAngle >= 0.5f * kPi ? 1.0f : sqr(std::sin(splitAngle)); }
+}  // namespace
+
 int LightTree::sampleSplit(const Vec3& p, const Vec3* n, float u, float splitAngle, Choice* out) const {
   if (m_nodes.empty()) return 0;
-  const float sinSplit2 = splitAngle >= 0.5f * kPi ? 1.0f : sqr(std::sin(splitAngle));
+  const float sinSplit2 = sinSquared(splitAngle);
   // Depth-first over the groups: a stack of (node, u, pmf so far in its group).
   struct Item {
     uint32_t node;
@@ -267,31 +280,18 @@ int LightTree::sampleSplit(const Vec3& p, const Vec3* n, float u, float splitAng
   stack[top++] = {0, u, 1.0f};
   while (top > 0) {
     Item it = stack[--top];
-    for (;;) {
+    while (it.node != UINT32_MAX) {
       const Node& node = m_nodes[it.node];
       if (node.leaf) {
         if (it.pmf > 0.0f) out[count++] = {node.light, it.pmf, it.u};
         break;
       }
-      const uint32_t c0 = it.node + 1, c1 = node.second;
       if (splits(node, p, sinSplit2)) {
         // Both children, each with the same number (their choices are independent groups).
-        stack[top++] = {c1, it.u, it.pmf};
-        it.node = c0;
-        continue;
-      }
-      const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
-      const float sum = i0 + i1;
-      if (!(sum > 0.0f)) break;
-      const float p0 = i0 / sum;
-      if (it.u < p0) {
-        it.u = std::min(it.u / p0, kOneMinusEpsilon);
-        it.pmf *= p0;
-        it.node = c0;
+        stack[top++] = {node.second, it.u, it.pmf};
+        it.node = it.node + 1;
       } else {
-        it.u = std::min((it.u - p0) / (1.0f - p0), kOneMinusEpsilon);
-        it.pmf *= 1.0f - p0;
-        it.node = c1;
+        it.node = descend(it.node, p, n, it.u, it.pmf);
       }
     }
   }
@@ -299,25 +299,7 @@ int LightTree::sampleSplit(const Vec3& p, const Vec3* n, float u, float splitAng
 }
 
 float LightTree::pmfSplit(const Vec3& p, const Vec3* n, uint32_t light, float splitAngle) const {
-  if (light >= m_leafOf.size() || m_leafOf[light] == UINT32_MAX) return 0.0f;
-  const float sinSplit2 = splitAngle >= 0.5f * kPi ? 1.0f : sqr(std::sin(splitAngle));
-  float pmf = 1.0f;
-  uint32_t i = m_leafOf[light];
-  while (m_nodes[i].parent != UINT32_MAX) {
-    const uint32_t parent = m_nodes[i].parent;
-    const Node& pn = m_nodes[parent];
-    if (!splits(pn, p, sinSplit2)) {
-      const uint32_t c0 = parent + 1, c1 = pn.second;
-      const float i0 = m_nodes[c0].ib.importance(p, n), i1 = m_nodes[c1].ib.importance(p, n);
-      const float sum = i0 + i1;
-      if (!(sum > 0.0f)) return 0.0f;
-      // The same arithmetic as sampleSplit's choice.
-      const float p0 = i0 / sum;
-      pmf *= i == c0 ? p0 : 1.0f - p0;
-    }
-    i = parent;
-  }
-  return pmf;
+  return pmfUp(p, n, light, true, sinSquared(splitAngle));
 }
 
 }  // namespace voxcone

@@ -115,7 +115,9 @@ TEST(LightTree, ProbabilitiesSumToAtMostOneAndSampleReportsWhatPmfRecomputes) {
           reachable = reachable || set.bounds[size_t(l)].importance(p, normal) > 0.0f;
         }
         EXPECT_LE(sum, 1.0 + 1e-5) << n << " lights";
-        if (!reachable && n > 1) EXPECT_EQ(sum, 0.0);  // one light is its own root: always chosen
+        if (!reachable && n > 1) {
+          EXPECT_EQ(sum, 0.0);  // one light is its own root: always chosen
+        }
         if (n == 256) {
           ++points256;
           deficit256 += 1.0 - sum;
@@ -249,7 +251,9 @@ TEST(LightTree, SplitChoicesReportTheirGroupsPmfAndGiveEveryLightItsShare) {
       for (size_t l = 0; l < count.size(); ++l) {
         const double expected = double(tree.pmfSplit(p, &nrm, uint32_t(l), angle)) * kM;
         EXPECT_LE(std::fabs(count[l] - expected), 1.01) << "light " << l << " angle " << angle;
-        if (set.bounds[l].importance(p, &nrm) > 0.0f) EXPECT_GT(expected, 0.0) << "light " << l;
+        if (set.bounds[l].importance(p, &nrm) > 0.0f) {
+          EXPECT_GT(expected, 0.0) << "light " << l;
+        }
       }
     }
     std::printf("split angle %.2f rad: at most %d choices\n", angle, most);

@@ -103,6 +103,16 @@ private:
   };
   /// Does sampleSplit walk both children of `node` at p?
   bool splits(const Node& node, const Vec3& p, float sinSplit2) const;
+  /// The probability that the walk at internal node i takes its first child (the children's
+  /// importances normalized); negative where neither child can reach p.
+  float firstChildProbability(uint32_t i, const Vec3& p, const Vec3* n) const;
+  /// One step of the walk down from internal node i: the child u chooses by
+  /// firstChildProbability, u rescaled within its share and pmf multiplied by it; UINT32_MAX
+  /// where neither child can reach p.
+  uint32_t descend(uint32_t i, const Vec3& p, const Vec3* n, float& u, float& pmf) const;
+  /// The probability of choosing `light`, from its leaf up; with `split`, nodes that split
+  /// (at sinSplit2, the split angle's sine squared) count as certain.
+  float pmfUp(const Vec3& p, const Vec3* n, uint32_t light, bool split, float sinSplit2) const;
   uint32_t build(std::vector<uint32_t>& idx, size_t begin, size_t end, const std::vector<LightBounds>& lights,
                  uint32_t parent);
 

@@ -202,12 +202,14 @@ public:
   /// (`cosineAbout` likewise), its pdf the direction's alone (no choice among the lights); no
   /// sample without an environment.
   LightSample sampleEnvironment(const Vec3& ref, const Vec2& u, const Vec3* cosineAbout = nullptr) const;
-  /// Solid-angle pdf of sampleLight (with the environment, and `normal` as given to it)
-  /// choosing point `lightPos` on emissive `triangle` from ref.
+  /// Solid-angle pdf of sampleLights (with the environment, and `normal` as given to it)
+  /// choosing point `lightPos` on emissive `triangle` from ref: sampleLight's without splitting,
+  /// else that of the choice in the light's own group.
   float lightPdf(const Vec3& ref, const Vec3* normal, uint32_t triangle, const Vec3& lightPos,
                  const Vec3& lightNormal) const;
-  /// The probability that sampleLight (with the environment) chooses light `light` (the order
-  /// of lightCount(): emissive triangles, point lights, directional lights, the environment).
+  /// The probability that sampleLights (with the environment) chooses light `light` (the order
+  /// of lightCount(): emissive triangles, point lights, directional lights, the environment),
+  /// within its group where the tree splits.
   float lightChoicePmf(const Vec3& ref, const Vec3* normal, size_t light) const;
   /// Choose lights by the tree (true) or by power alone (false) from now on.
   void setLightTree(bool on) { render.lightTree = on; }
