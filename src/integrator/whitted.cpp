@@ -55,9 +55,11 @@ Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHi
                          int samples, bool withEnvironment, int bsdfSamples) {
   Vec3 sum(0.0f);
   for (int i = 0; i < samples; ++i) {
+    // Under MIS the environment's samples must have the density escapedMis weighs them by: its
+    // own sampler's, not the cosine mixture's.
     LightSample ls[LightTree::kMaxChoices];
-    const int count = scene.sampleLights(hit.position, sampler.uniform2(), withEnvironment, &hit.shadingNormal,
-                                         &hit.shadingNormal, ls);
+    const int count = scene.sampleLights(hit.position, sampler.uniform2(), withEnvironment,
+                                         bsdfSamples > 0 ? nullptr : &hit.shadingNormal, &hit.shadingNormal, ls);
     for (int k = 0; k < count; ++k) sum += shadeLightSample(scene, accel, hit, woWorld, ls[k], 0.0f, samples, bsdfSamples);
   }
   return sum / static_cast<float>(samples);

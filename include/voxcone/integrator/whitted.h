@@ -27,10 +27,11 @@ private:
 
 /// Direct light at a non-delta surface by light sampling: one estimate with `samples` shadow
 /// rays. wo is the unit direction towards the viewer (world space). Without `withEnvironment`
-/// the environment is left out (Scene::sampleLight). With `bsdfSamples` > 0 each sample of an
+/// the environment is left out (Scene::sampleLights). With `bsdfSamples` > 0 each sample of an
 /// area light or the environment is weighted by the power heuristic against that many BSDF
 /// samples taken by the caller (Veach's multi-sample MIS: the caller weights the light its BSDF
-/// samples find by the same heuristic, misWeightOfBsdfSample); 0: light sampling alone.
+/// samples find by the same heuristic, misWeightedEmission), and a constant environment is
+/// sampled by its own sampler (the pdf escapedPdf gives); 0: light sampling alone.
 Vec3 estimateDirectLight(const Scene& scene, const Accel& accel, const SurfaceHit& hit, const Vec3& wo, Sampler& sampler,
                          int samples, bool withEnvironment = true, int bsdfSamples = 0);
 /// The emission a BSDF sample of direction wi (world, pdf bsdfPdf) finds at `light` (the first
