@@ -60,6 +60,18 @@ PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const Pho
   for (const Photon& ph : maps.global)
     if (!s.indirectOnly || ph.bounces > 0) m_photons.push_back(ph);
   m_photons.insert(m_photons.end(), maps.caustic.begin(), maps.caustic.end());
+  build();
+}
+
+PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, std::vector<Photon> photons,
+                               const PhotonRadianceSettings& s)
+    : m_scene(&scene), m_accel(&accel), m_settings(s), m_photons(std::move(photons)) {
+  m_settings.cacheStride = 0;
+  build();
+}
+
+void PhotonRadiance::build() {
+  const PhotonRadianceSettings& s = m_settings;
   std::vector<Vec3> positions(m_photons.size());
   for (size_t i = 0; i < m_photons.size(); ++i) positions[i] = m_photons[i].position;
   m_tree = PhotonKdTree(positions);
@@ -151,7 +163,7 @@ float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec
 }
 
 Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius,
-                                   int skipStride) const {
+                                   int skipStride, const Lobe* lobe) const {
   thread_local std::vector<KdNeighbor> neighbors;
   const float maxDist2 = m_settings.maxRadius * m_settings.maxRadius;
   const int k = m_settings.k;
@@ -199,7 +211,7 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
     ray.dir = lifted(ph.position, ph.normal, x, side, lift) - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
-    sum += ph.power;
+    sum += lobe ? bsdfEval(*lobe->material, lobe->wo, lobe->frame.toLocal(ph.incident)) * ph.power : ph.power;
   }
   // Left-out photons carry their share of the flux: the rest stand for all of it.
   if (skipStride > 1) sum *= float(skipStride) / float(skipStride - 1);
@@ -235,6 +247,13 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
     return true;
   }
   return false;
+}
+
+Vec3 PhotonRadiance::reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& wo) const {
+  if (m_photons.empty()) return Vec3(0.0f);
+  Material textured;
+  const Lobe lobe{&m_scene->materialAt(hit, textured), Frame(hit.shadingNormal), wo};
+  return irradianceAt(hit.position, hit.positionError, side, nullptr, 0, &lobe);
 }
 
 Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {

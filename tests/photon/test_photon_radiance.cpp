@@ -84,6 +84,28 @@ TEST(PhotonRadiance, UniformPhotonsGiveAlbedoOverPiTimesIrradiance) {
   EXPECT_EQ(est.radiance(floorHit(scene, -1.0f, 0.0f), Vec3(0, -1, 0)), Vec3(0.0f));
 }
 
+TEST(PhotonRadiance, ReflectedWeighsEachPhotonByTheBsdf) {
+  // reflected() is the same filtered estimate with each photon weighted by f(wo, wi_p): on the
+  // Lambertian floor f = albedo / pi for every photon, so it equals radiance() (no precomputed
+  // entries in either) to float rounding, from any wo; an estimator over the photons alone
+  // (the glossy caustics' constructor) gives the same; below the floor nothing arrived.
+  const Scene scene = wallScene(0.0055f);
+  PhotonMaps maps;
+  addFloorPhotons(maps.global, 80000, -2.0f, 0.0f, 1e-4f, 1);
+  const auto accel = buildAccel("hbvh", scene);
+  const PhotonRadiance est(scene, *accel, maps, {400, 1.0f}), alone(scene, *accel, maps.global, {400, 1.0f});
+  for (float z : {-1.0f, 0.0f, 1.0f}) {
+    const SurfaceHit hit = floorHit(scene, -1.0f, z);
+    const Vec3 L = est.radiance(hit, Vec3(0, 1, 0));
+    ASSERT_GT(L.x, 0.0f);
+    for (const Vec3 wo : {Vec3(0, 0, 1), glm::normalize(Vec3(0.6f, -0.3f, 0.5f))}) {
+      EXPECT_NEAR(est.reflected(hit, Vec3(0, 1, 0), wo).x, L.x, 1e-5f * L.x) << "z " << z;
+      EXPECT_NEAR(alone.reflected(hit, Vec3(0, 1, 0), wo).x, L.x, 1e-5f * L.x) << "z " << z;
+    }
+  }
+  EXPECT_EQ(est.reflected(floorHit(scene, -1.0f, 0.0f), Vec3(0, -1, 0), Vec3(0, 0, 1)), Vec3(0.0f));
+}
+
 TEST(PhotonRadiance, IndirectOnlyLeavesOutThePhotonsStraightFromALight) {
   // The same floor twice over: 80k photons straight from a light (E = 1 W/m^2) and 80k that
   // bounced (bounces 2, power 3e-4: E = 3 W/m^2). All of them estimate 4 W/m^2, the bounced

@@ -44,6 +44,7 @@ namespace voxcone {
 class Accel;
 class Scene;
 struct SurfaceHit;
+struct Material;
 
 /// Settings of the estimate.
 struct PhotonRadianceSettings {
@@ -69,6 +70,8 @@ public:
   /// its own light paths, so their union estimates all diffuse radiance). Holds references to
   /// `scene` and `accel`.
   PhotonRadiance(const Scene& scene, const Accel& accel, const PhotonMaps& maps, const PhotonRadianceSettings& s);
+  /// Over `photons` alone (PhotonMaps::glossyCaustic: for reflected()); no precomputed entries.
+  PhotonRadiance(const Scene& scene, const Accel& accel, std::vector<Photon> photons, const PhotonRadianceSettings& s);
   bool empty() const { return m_photons.empty(); }
   size_t size() const { return m_photons.size(); }
   /// Outgoing radiance (W / (sr m^2) per channel) on side `side` (unit: the geometric normal
@@ -76,6 +79,11 @@ public:
   /// (Oren-Nayar surfaces taken as Lambertian); zero on surfaces that are not diffuse
   /// (Material::isDiffuse), as the field holds them.
   Vec3 radiance(const SurfaceHit& hit, const Vec3& side) const;
+  /// Outgoing radiance towards wo (unit, local to the frame of hit's shading normal) on side
+  /// `side` of any non-delta hit: the same filtered estimate, each photon weighted by the BSDF,
+  /// sum f(wo, wi_p) Phi_p / (pi r^2 covered) (Jensen 2001, eq. 7.6: for photons that ended on
+  /// glossy surfaces, whose reflection depends on where they came from).
+  Vec3 reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& wo) const;
   /// Bytes held (photons, the cache and their trees).
   size_t memoryBytes() const;
   /// Entries of the precomputed irradiance, and how many of them lookups have estimated so far.
@@ -99,8 +107,16 @@ private:
   /// radius goes to `radius`. With skipStride > 1 the photons whose index is a multiple of it
   /// (the cache's) are left out and the others carry their flux: an entry's estimate is then
   /// independent of where the entries lie.
+  /// With `lobe`, each photon's power weighted by the BSDF towards the lobe's wo (reflected()).
+  struct Lobe {
+    const Material* material;
+    Frame frame;
+    Vec3 wo;
+  };
   Vec3 irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius = nullptr,
-                    int skipStride = 0) const;
+                    int skipStride = 0, const Lobe* lobe = nullptr) const;
+  /// The tree over m_photons and, with cacheStride > 1, the precomputed entries.
+  void build();
   /// The precomputed irradiance for x on side `side`: the nearest entry that passes the filters,
   /// or false.
   bool cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const;

@@ -26,6 +26,15 @@ namespace voxcone {
 namespace {
 /// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
 constexpr double kGuidePerBin = 8.0;
+
+/// Point i of an n-point Hammersley set ((i + 1/2) / n, the radical inverse of i) shifted by
+/// `shift` and wrapped into [0, 1)^2 (a Cranley-Patterson rotation): the numbers of a gather's
+/// cones, stratified over them, different at every gather.
+Vec2 shiftedHammersley(size_t i, size_t n, const Vec2& shift) {
+  Vec2 u((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
+  u -= glm::floor(u);
+  return glm::min(u, Vec2(kOneMinusEpsilon));
+}
 }  // namespace
 
 VoxelConeIntegrator::VoxelConeIntegrator(const IntegratorContext& c)
@@ -141,8 +150,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     m_settings.voxel = m_field.settings();
     m_settings.voxel.memoryBudgetBytes = budget;
     m_settings.photons.photons = m_settings.photons.causticPhotons = 0;
-    m_glossyCaustic.clear();
-    m_glossyCausticTree = PhotonKdTree();
+    m_glossyCaustics = PhotonRadiance();
     m_glossyCausticByPhotons = false;
     m_stats = nlohmann::json::object();
     m_stats["field_read_seconds"] = total.seconds();
@@ -155,14 +163,8 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   m_stats.update(maps.stats.toJson());
   // Caustics on glossy surfaces from the caustic pass's photons where it ran (a scene with
   // mirrors or glass); else the glossy cones find them through the mirrors.
-  m_glossyCaustic = maps.glossyCaustic;
   m_glossyCausticByPhotons = maps.stats.emittedCaustic > 0 && m_settings.hitGather;
-  {
-    std::vector<Vec3> positions;
-    positions.reserve(m_glossyCaustic.size());
-    for (const Photon& p : m_glossyCaustic) positions.push_back(p.position);
-    m_glossyCausticTree = PhotonKdTree(positions);
-  }
+  m_glossyCaustics = PhotonRadiance(m_scene, m_accel, maps.glossyCaustic, m_settings.hitEstimate);
   m_stats["photon_trace_seconds"] = maps.stats.seconds;
   m_tracer.reset();
   if (m_settings.hitPhotons) {
@@ -235,8 +237,7 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
         geo.toWorld(Vec3(cr * cone.axis.x - sr * cone.axis.y, sr * cone.axis.x + cr * cone.axis.y, cone.axis.z));
     const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : kPi * bsdfEvalBase(mat, wo, frame.toLocal(d));
     if (isBlack(f)) continue;
-    Vec2 lightU((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
-    lightU -= glm::floor(lightU);
+    const Vec2 lightU = shiftedHammersley(i, n, shift);
     indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf, lightU, 0,
                                                   m_settings.skyByCones);
   }
@@ -332,31 +333,8 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
                             ? &caustic
                             : nullptr);
   direct += found;
-  if (m_glossyCausticByPhotons && m_settings.view == View::Full) caustic = glossyCausticRadiance(sh, frame, wo, mat, ng);
+  if (m_glossyCausticByPhotons && m_settings.view == View::Full) caustic = m_glossyCaustics.reflected(sh, ng, wo);
   return result();
-}
-
-Vec3 VoxelConeIntegrator::glossyCausticRadiance(const SurfaceHit& sh, const Frame& frame, const Vec3& wo,
-                                                const Material& mat, const Vec3& ng) const {
-  if (m_glossyCausticTree.empty()) return Vec3(0.0f);
-  thread_local std::vector<KdNeighbor> near;
-  const int k = m_settings.hitEstimate.k;
-  const float maxR2 = sqr(m_settings.hitEstimate.maxRadius);
-  m_glossyCausticTree.knn(sh.position, k, maxR2, near);
-  if (near.empty()) return Vec3(0.0f);
-  // The disc of the k-th photon (of hit_radius where fewer lie within it).
-  const float r2 = near.size() == size_t(k) ? near.back().dist2 : maxR2;
-  if (!(r2 > 0.0f)) return Vec3(0.0f);
-  // On this surface: arrived on the viewer's side of a surface facing as this one does (within
-  // about 25 degrees), within a tenth of the disc's radius of its tangent plane.
-  const float planeTol2 = 0.01f * r2;
-  Vec3 sum(0.0f);
-  for (const KdNeighbor& nb : near) {
-    const Photon& ph = m_glossyCaustic[nb.index];
-    if (glm::dot(ph.normal, ng) < 0.9f || sqr(glm::dot(ph.position - sh.position, ng)) > planeTol2) continue;
-    sum += bsdfEval(mat, wo, frame.toLocal(ph.incident)) * ph.power;
-  }
-  return sum / (kPi * r2);
 }
 
 int VoxelConeIntegrator::glossyLobeCones(float roughness) const {
@@ -381,15 +359,12 @@ Vec3 VoxelConeIntegrator::gatherLobe(const SurfaceHit& sh, const Frame& frame, c
   // Roughness is in (0, 1]. Below 0.01 a marched cone would stay one finest voxel wide for over
   // 100 steps; the lookups cannot resolve less than a voxel anyway.
   const float tanHalf = std::max(mat.roughness, 0.01f);
-  const auto wrap = [](float x) { return x - std::floor(x); };
   Vec3 L(0.0f), Le(0.0f), C(0.0f);
   for (int i = 0; i < n; ++i) {
-    const float hammersley = float(sobolDim0(uint32_t(i))) * 0x1p-32f;
-    const Vec2 u(std::min(wrap((float(i) + shift.x) / float(n)), kOneMinusEpsilon),
-                 std::min(wrap(hammersley + shift.y), kOneMinusEpsilon));
-    const float uc = std::min(wrap(ucShift + (float(i) + 0.5f) / float(n)), kOneMinusEpsilon);
-    Vec2 lightU((float(i) + 0.5f) / float(n) + lightShift.x, hammersley + lightShift.y);
-    lightU -= glm::floor(lightU);
+    const Vec2 u = shiftedHammersley(size_t(i), size_t(n), shift);
+    const Vec2 lightU = shiftedHammersley(size_t(i), size_t(n), lightShift);
+    // The lobe's choice stratified too: the Hammersley set's first coordinate, shifted apart.
+    const float uc = shiftedHammersley(size_t(i), size_t(n), Vec2(ucShift, 0.0f)).x;
     BsdfSample bs;
     if (!(coat ? coatSample(mat, wo, u, bs) : bsdfSample(mat, wo, uc, u, bs)) || isBlack(bs.weight)) continue;
     const Vec3 d = frame.toWorld(bs.wi);

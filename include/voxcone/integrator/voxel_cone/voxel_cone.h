@@ -141,8 +141,6 @@
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
-#include "voxcone/photon/photon_kdtree.h"
-#include "voxcone/photon/photon_tracer.h"
 #include "voxcone/voxel/voxel_field.h"
 
 #include <optional>
@@ -190,11 +188,6 @@ private:
   /// through mirrors and glass (ConeTracer::trace's deltaLight).
   Vec3 gatherLobe(const SurfaceHit& sh, const Frame& frame, const Vec3& wo, const Material& mat, Sampler& sampler,
                   bool coat, Vec3* emission, Vec3* caustic) const;
-  /// Caustics (L S+ G) at glossy hit sh seen from local wo: the glossy caustic photons'
-  /// density estimate, sum f(wo, wi_p) power_p / (pi r^2) over the hit_photons nearest within
-  /// hit_radius that arrived on the viewer's side (ng) of a surface of the same orientation.
-  Vec3 glossyCausticRadiance(const SurfaceHit& sh, const Frame& frame, const Vec3& wo, const Material& mat,
-                             const Vec3& ng) const;
   /// Cones over a lobe of this roughness: ceil((roughness / glossy_switch)^2), 1 to glossy_cones.
   int glossyLobeCones(float roughness) const;
   /// Reflected radiance at a non-delta hit; with `split`, the cones' indirect light of a diffuse
@@ -225,8 +218,7 @@ private:
 
   VoxelField m_field;
   PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
-  std::vector<Photon> m_glossyCaustic;  ///< caustic photons on glossy surfaces (PhotonMaps::glossyCaustic)
-  PhotonKdTree m_glossyCausticTree;     ///< over their positions
+  PhotonRadiance m_glossyCaustics;  ///< over the caustic photons on glossy surfaces (PhotonMaps::glossyCaustic)
   bool m_glossyCausticByPhotons = false;  ///< L S+ G from those photons (else from the cones, trace's deltaLight)
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
   float m_causticVoxel = 0.0f;  ///< caustic grid voxel size (the finest voxel without one)
