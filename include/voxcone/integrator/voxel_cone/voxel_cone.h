@@ -35,9 +35,10 @@
 ///    is atan(roughness) (for the march). With gather = hit the lights the cones' axes meet
 ///    count too, and the glossy surface's light samples and they are weighted by the power
 ///    heuristic (multi-sample MIS). Caustics on a glossy surface (L S+ G: a light seen in a
-///    mirror) come from the caustic pass's photons that ended there (PhotonMaps::glossyCaustic;
-///    a density estimate weighted by the BSDF), or, without a caustic pass, from the cones
-///    through mirrors and glass.
+///    mirror) come from the caustic pass's photons that ended there (PhotonMaps::glossyCaustic:
+///    PhotonRadiance::reflected, its filtered estimate with each photon weighted by the BSDF,
+///    on the gathering samples), or, without a caustic pass, from the cones through mirrors
+///    and glass.
 ///
 /// A cone of half-angle theta is marched front to back. Each sample is a filtered lookup whose
 /// footprint has the variance of the cone's cross-section: directions uniform over the cone's
