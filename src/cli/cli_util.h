@@ -4,6 +4,7 @@
 
 #include "voxcone/batch/process.h"
 #include "voxcone/batch/study.h"
+#include "voxcone/denoise/denoiser.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json_fwd.hpp>
@@ -58,5 +59,14 @@ const std::vector<std::string>& commandLine();
 std::string dataRoot();
 /// dataRoot() + "/" + relative.
 std::string dataPath(const std::string& relative);
+
+/// The denoiser for the auxiliary images given (Denoiser::weightsFile) read from `weightsDir`,
+/// or data/models/oidn where empty, and the file it came from; missing weights are a
+/// SettingsError that names the fetch script (cmd_denoise.cpp).
+struct LoadedDenoiser {
+  Denoiser denoiser;
+  std::string weightsPath;
+};
+LoadedDenoiser loadDenoiser(bool albedo, bool normal, const std::string& weightsDir);
 
 }  // namespace voxcone

@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <tbb/task_group.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <unistd.h>
@@ -50,6 +51,8 @@ struct RenderOptions {
   double memoryBudgetMb = -1.0;   // --memory-budget-mb (voxcone); -1: not given
   bool writePartial = false;      // --write-partial: an interrupted render writes its complete passes
   std::string aovs;               // --aov: layers beside the beauty (integrator.h Aov)
+  bool denoise = false;           // --denoise: the beauty through the denoiser (denoise/denoiser.h)
+  std::string denoiseWeights;     // --denoise-weights: the .tza folder
   bool quiet = false;
   std::vector<std::string> defines;  // -D NAME=VALUE: Mitsuba scene parameters
 };
@@ -132,6 +135,21 @@ void runRender(const RenderOptions& o) {
   if (!o.aovs.empty()) {
     aovs.layers = parseAovs(o.aovs);
     if (autoSettings) throw SettingsError("--aov with --target-error / --time-budget: the passes are averaged images, not layers");
+  }
+  // --denoise: the network takes the first hit's albedo and normal, rendered as AOV layers
+  // (written only where --aov asks for them). Its weights are read before any work is done.
+  std::optional<LoadedDenoiser> denoiser;
+  std::vector<Aov> denoiseOnlyLayers;
+  if (o.denoise) {
+    if (autoSettings) throw SettingsError("--denoise with --target-error / --time-budget is not supported");
+    denoiser = loadDenoiser(true, true, o.denoiseWeights);
+    for (Aov a : {Aov::Albedo, Aov::Normal})
+      if (std::find(aovs.layers.begin(), aovs.layers.end(), a) == aovs.layers.end()) {
+        aovs.layers.push_back(a);
+        denoiseOnlyLayers.push_back(a);
+      }
+  } else if (!o.denoiseWeights.empty()) {
+    throw SettingsError("--denoise-weights without --denoise");
   }
 
   nlohmann::json options;
@@ -220,6 +238,30 @@ void runRender(const RenderOptions& o) {
     prepareSec = t.seconds();
     result = renderImage(scene, *integrator, settings, &progress, o.writePartial, &aovs);
   }
+  nlohmann::json denoiseReport;
+  if (denoiser) {
+    Timer td;
+    const auto layerImage = [&](Aov a) {
+      for (const ImageLayer& l : result.layers)
+        if (l.name == aovNames()[size_t(a)]) {
+          Image img(settings.width, settings.height);
+          for (size_t p = 0; p < img.pixels.size(); ++p)
+            for (int k = 0; k < 3; ++k) img.pixels[p][k] = l.values[p * 3 + size_t(k)];
+          return img;
+        }
+      throw Error("--denoise: the render has no " + aovNames()[size_t(a)] + " layer");
+    };
+    const Image albedo = layerImage(Aov::Albedo), normal = layerImage(Aov::Normal);
+    DenoiseTimings tm;
+    result.image = denoiser->denoiser.denoise(result.image, &albedo, &normal, &tm);
+    for (Aov a : denoiseOnlyLayers)
+      result.layers.erase(std::remove_if(result.layers.begin(), result.layers.end(),
+                                         [&](const ImageLayer& l) { return l.name == aovNames()[size_t(a)]; }),
+                          result.layers.end());
+    denoiseReport = {{"weights", std::filesystem::path(denoiser->weightsPath).filename().string()},
+                     {"seconds", td.seconds()}, {"input_seconds", tm.input}, {"network_seconds", tm.network},
+                     {"output_seconds", tm.output}};
+  }
   // Interrupted with --write-partial: the image holds the passes that completed, written as a
   // complete set that says so (sidecar "partial", EXR voxcone:partial, spp the samples taken).
   const int requestedSpp = settings.spp;
@@ -254,6 +296,10 @@ void runRender(const RenderOptions& o) {
                      {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds},
                      {"render_stage_seconds", result.stageSeconds}};
   if (autoSettings) meta["auto"] = autoReport;
+  if (denoiser) {
+    meta["denoise"] = denoiseReport;
+    meta["timings"]["denoise_seconds"] = denoiseReport["seconds"];
+  }
   meta["stats"] = {{"scene", scene.statsJson()}, {"accel", accel->statsJson()},
                    {"integrator", integrator->statsJson()},
                    {"samples", result.samples}, {"invalid_samples", result.invalidSamples},
@@ -380,6 +426,11 @@ void addRenderCommand(CLI::App& app) {
                   "depth (Z): the first hit, box-filtered; emitted, direct, indirect, caustic (Emitted.RGB ...): "
                   "the radiance's terms, which add up to RGB (path, whitted, voxcone)")
       ->default_str("none");
+  cmd->add_flag("--denoise", o->denoise,
+                "Denoise the image with Open Image Denoise's RT network, with the first hit's albedo and normal "
+                "(weights: bash tools/fetch_models.sh)");
+  cmd->add_option("--denoise-weights", o->denoiseWeights, "Folder of the denoiser's .tza weights")
+      ->default_str("data/models/oidn");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress output");
   cmd->callback([o] { runRender(*o); });
 }

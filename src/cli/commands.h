@@ -13,6 +13,7 @@ void addStudyCommand(CLI::App& app);
 void addBatchCommand(CLI::App& app);
 void addGenerateCommand(CLI::App& app);
 void addConvertCommand(CLI::App& app);
+void addDenoiseCommand(CLI::App& app);
 /// `voxcone study structures` and `study scaling` (cmd_study_structures.cpp), under `study`.
 void addStructureStudies(CLI::App& study);
 

@@ -56,6 +56,7 @@ int main(int argc, char** argv) {
   voxcone::addBatchCommand(app);
   voxcone::addGenerateCommand(app);
   voxcone::addConvertCommand(app);
+  voxcone::addDenoiseCommand(app);
   voxcone::installInterruptHandler();
   voxcone::setCommandLine(argc, argv);
   try {

@@ -30,6 +30,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
@@ -769,6 +770,33 @@ DecodedImage readJpeg(const std::string& path) {
 }
 
 }  // namespace
+
+std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw ImageError(path + ": no such image file");
+  unsigned char magic[4] = {};
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw ImageError(path + ": cannot open: " + std::strerror(errno));
+    in.read(reinterpret_cast<char*>(magic), sizeof(magic));
+  }
+  static const unsigned char kExr[4] = {0x76, 0x2f, 0x31, 0x01};
+  if (std::memcmp(magic, kExr, 4) != 0) return std::nullopt;
+  const DecodedImage d = readExr(path);
+  static const char* const kNames[2][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
+  for (const auto& names : kNames) {
+    int at[3] = {-1, -1, -1};
+    for (int k = 0; k < 3; ++k)
+      for (size_t c = 0; c < d.names.size(); ++c)
+        if (d.names[c] == prefix + names[k]) at[k] = int(c);
+    if (at[0] < 0 || at[1] < 0 || at[2] < 0) continue;
+    Image out(d.width, d.height);
+    for (size_t p = 0; p < out.pixels.size(); ++p)
+      for (int k = 0; k < 3; ++k) out.pixels[p][k] = d.values[p * size_t(d.channels) + size_t(at[k])];
+    return out;
+  }
+  return std::nullopt;
+}
 
 Image readImage(const std::string& path) {
   std::error_code ec;

@@ -10,6 +10,7 @@
 
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -70,6 +71,10 @@ void writeImage(const std::string& path, const Image& image, const nlohmann::jso
 /// (PNG, JPEG) are converted to linear (sRGB, or a PNG's gAMA exponent). Throws ImageError with a
 /// one-line message when the file is missing, unreadable, truncated or of another format.
 Image readImage(const std::string& path);
+/// The three channels `prefix`R/G/B or `prefix`X/Y/Z (an AOV layer voxcone writes: "Albedo.",
+/// "Ns.") of an OpenEXR file as an image, or nullopt where the file has no such layer (or is
+/// not an EXR). Throws ImageError where the file cannot be read.
+std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix);
 
 /// Write pretty JSON (2-space indent) atomically, or as part of `set`. Throws Error.
 void writeJsonAtomic(const std::string& path, const nlohmann::json& value, OutputSet* set = nullptr);

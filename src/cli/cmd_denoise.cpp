@@ -1,0 +1,106 @@
+/// \file cmd_denoise.cpp
+/// `voxcone denoise IN.exr -o OUT.exr`: Open Image Denoise's RT network (denoise/denoiser.h) on
+/// a render, with the albedo and normal layers `render --aov albedo,normal` writes beside it
+/// (or given as files), else the colour alone. Also the loader `render --denoise` shares.
+
+#include "cli_util.h"
+#include "commands.h"
+
+#include "voxcone/core/error.h"
+#include "voxcone/core/parallel.h"
+#include "voxcone/core/timer.h"
+#include "voxcone/denoise/denoiser.h"
+#include "voxcone/image/image_io.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+namespace voxcone {
+
+LoadedDenoiser loadDenoiser(bool albedo, bool normal, const std::string& weightsDir) {
+  const std::string file = Denoiser::weightsFile(albedo, normal);
+  const std::string dir = weightsDir.empty() ? dataPath("data/models/oidn") : weightsDir;
+  const std::string path = dir + "/" + file;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw SettingsError("denoiser weights " + path + " not found (bash tools/fetch_models.sh fetches them)");
+  return {Denoiser(readTza(path), albedo ? (normal ? 9 : 6) : 3), path};
+}
+
+namespace {
+
+struct DenoiseArgs {
+  std::string input, output, albedo, normal, weights;
+  std::string aux = "auto";
+  int threads = 0;
+};
+
+/// An auxiliary image: the file given, else the input's own layer (aux "auto"), else none.
+std::optional<Image> auxImage(const DenoiseArgs& a, const std::string& file, const std::string& layer,
+                              const char* what) {
+  if (!file.empty()) return readImage(file);
+  if (a.aux != "auto") return std::nullopt;
+  std::optional<Image> img = readImageLayer(a.input, layer);
+  if (img) std::printf("denoise: the %s from %s's %s layer\n", what, a.input.c_str(), layer.c_str());
+  return img;
+}
+
+void runDenoise(const DenoiseArgs& a) {
+  Timer total;
+  const ThreadLimit threads(a.threads);
+  const std::string ext = std::filesystem::path(a.output).extension().string();
+  if (ext != ".exr" && ext != ".png")
+    throw SettingsError("-o " + a.output + ": unknown extension '" + ext + "' (use .exr or .png)");
+  const Image color = readImage(a.input);
+  if (color.displayEncoded)
+    throw SettingsError(a.input + " is an 8-bit display image; the denoiser takes a linear HDR render (.exr)");
+  std::optional<Image> albedo, normal;
+  if (a.aux != "none") {
+    albedo = auxImage(a, a.albedo, "Albedo.", "albedo");
+    normal = auxImage(a, a.normal, "Ns.", "normal");
+  }
+  if (a.aux == "albedo") normal.reset();
+  if (normal && !albedo) {
+    if (!a.normal.empty()) throw SettingsError("--normal needs --albedo too (OIDN has no normal-only filter)");
+    normal.reset();
+  }
+  const LoadedDenoiser d = loadDenoiser(albedo.has_value(), normal.has_value(), a.weights);
+  DenoiseTimings tm;
+  const Image out = d.denoiser.denoise(color, albedo ? &*albedo : nullptr, normal ? &*normal : nullptr, &tm);
+  const nlohmann::json meta = {{"denoised", a.input},
+                               {"denoiser", {{"weights", std::filesystem::path(d.weightsPath).filename().string()},
+                                             {"input_seconds", tm.input},
+                                             {"network_seconds", tm.network},
+                                             {"output_seconds", tm.output}}}};
+  writeImage(a.output, out, meta);
+  std::printf("wrote %s (%s; network %.3f s, total %.3f s)\n", a.output.c_str(),
+              std::filesystem::path(d.weightsPath).filename().string().c_str(), tm.network, total.seconds());
+}
+
+}  // namespace
+
+void addDenoiseCommand(CLI::App& app) {
+  auto a = std::make_shared<DenoiseArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "denoise", "Denoise an HDR render with Open Image Denoise's RT network (weights: bash tools/fetch_models.sh)");
+  cmd->add_option("input", a->input, "The render (linear .exr; its Albedo and Ns layers are used where present)")
+      ->required()
+      ->check(nonEmpty());
+  cmd->add_option("-o,--output", a->output, "The denoised image (.exr or .png)")->required()->check(nonEmpty());
+  cmd->add_option("--albedo", a->albedo, "Albedo image (instead of the input's Albedo layer)");
+  cmd->add_option("--normal", a->normal, "Normal image in [-1, 1] (instead of the input's Ns layer; needs an albedo)");
+  cmd->add_option("--aux", a->aux, "Auxiliary images: auto (files given, else the input's layers), albedo (no normal), none")
+      ->check(CLI::IsMember({"auto", "albedo", "none"}))
+      ->default_str("auto");
+  cmd->add_option("--weights", a->weights, "Folder of the .tza weights")->default_str("data/models/oidn");
+  cmd->add_option("-t,--threads", a->threads, "Threads (0 = all)")->check(CLI::Range(0, 4096));
+  cmd->callback([a] { runDenoise(*a); });
+}
+
+}  // namespace voxcone

@@ -1,0 +1,127 @@
+#pragma once
+/// \file conv_kernel.h
+/// The denoiser's 3x3 convolution over channel-blocked tensors, written once and compiled per
+/// instruction set (conv_generic.cpp with the library's flags, conv_avx2.cpp with AVX2 and FMA;
+/// unet.cpp chooses at run time). Each output value is a sum in a fixed order (input block,
+/// kernel row, kernel column, channel), so the result does not depend on how rows are shared
+/// among threads.
+
+#include <cstddef>
+
+namespace voxcone::denoise {
+
+/// Channels per block: one 8-float vector (AVX2's width).
+constexpr int kBlock = 8;
+typedef float Vec8 __attribute__((vector_size(32)));
+
+/// A tensor's view for one convolution: `blocks` channel blocks of (h + 2) x (w + 2) pixels of
+/// kBlock floats (a zero border of one pixel all round), block b at data + b * blockStride.
+struct TensorView {
+  float* data = nullptr;
+  int blocks = 0;
+  int h = 0, w = 0;
+  size_t blockStride = 0;
+  float* pixel(int b, int y, int x) const {
+    return data + size_t(b) * blockStride + (size_t(y + 1) * size_t(w + 2) + size_t(x + 1)) * kBlock;
+  }
+};
+
+/// One output row pair of blocks: out blocks ob and ob + 1 (where ob + 1 < out.blocks) of row y,
+/// from all of in's blocks. Weights are [out block][in block][ky][kx][in channel][out channel]
+/// (kBlock x kBlock floats per (ob, ib, ky, kx)); bias per output channel. relu: max(0, x).
+using ConvRowFn = void (*)(const TensorView& in, const TensorView& out, const float* weights, const float* bias,
+                           int ob, int y, bool relu);
+
+#ifdef VOXCONE_CONV_KERNEL_NAMESPACE
+namespace VOXCONE_CONV_KERNEL_NAMESPACE {
+
+namespace {
+
+/// XB output pixels of two output blocks (or one, Two false) starting at x0.
+template <int XB, bool Two>
+inline void convPixels(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
+                       int y, int x0, bool relu) {
+  constexpr bool two = Two;
+  Vec8 acc0[XB], acc1[XB];
+  Vec8 b0, b1 = {};
+  __builtin_memcpy(&b0, bias + size_t(ob) * kBlock, sizeof b0);
+  if constexpr (two) __builtin_memcpy(&b1, bias + size_t(ob + 1) * kBlock, sizeof b1);
+  for (int i = 0; i < XB; ++i) {
+    acc0[i] = b0;
+    acc1[i] = b1;
+  }
+  const size_t perOut = size_t(in.blocks) * 9 * kBlock * kBlock;
+  const float* w0 = weights + size_t(ob) * perOut;
+  const float* w1 = Two ? w0 + perOut : w0;
+  const size_t rowStride = size_t(in.w + 2) * kBlock;
+  for (int ib = 0; ib < in.blocks; ++ib) {
+    // Padded row y (the output row's upper neighbour) at padded column x0.
+    const float* base = in.data + size_t(ib) * in.blockStride + (size_t(y) * size_t(in.w + 2) + size_t(x0)) * kBlock;
+    for (int ky = 0; ky < 3; ++ky) {
+      const float* row = base + size_t(ky) * rowStride;
+      for (int kx = 0; kx < 3; ++kx) {
+        const float* src = row + size_t(kx) * kBlock;
+        const size_t wOff = ((size_t(ib) * 3 + size_t(ky)) * 3 + size_t(kx)) * kBlock * kBlock;
+        for (int c = 0; c < kBlock; ++c) {
+          Vec8 wa, wb = {};
+          __builtin_memcpy(&wa, w0 + wOff + size_t(c) * kBlock, sizeof wa);
+          if constexpr (two) __builtin_memcpy(&wb, w1 + wOff + size_t(c) * kBlock, sizeof wb);
+          for (int i = 0; i < XB; ++i) {
+            const float s = src[size_t(i) * kBlock + size_t(c)];
+            const Vec8 v = {s, s, s, s, s, s, s, s};
+            acc0[i] += v * wa;
+            if constexpr (two) acc1[i] += v * wb;
+          }
+        }
+      }
+    }
+  }
+  const Vec8 zero = {};
+  for (int i = 0; i < XB; ++i) {
+    if (relu) {
+      acc0[i] = acc0[i] > zero ? acc0[i] : zero;
+      acc1[i] = acc1[i] > zero ? acc1[i] : zero;
+    }
+    __builtin_memcpy(out.pixel(ob, y, x0 + i), &acc0[i], sizeof(Vec8));
+    if constexpr (two) __builtin_memcpy(out.pixel(ob + 1, y, x0 + i), &acc1[i], sizeof(Vec8));
+  }
+}
+
+template <bool Two>
+inline void convRowImpl(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
+                        int y, bool relu) {
+  // 6 pixels x 2 blocks: 12 accumulators, 2 weight vectors and a broadcast in 16 registers.
+  constexpr int kX = 6;
+  int x = 0;
+  for (; x + kX <= out.w; x += kX) convPixels<kX, Two>(in, out, weights, bias, ob, y, x, relu);
+  switch (out.w - x) {
+    case 5: convPixels<5, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    case 4: convPixels<4, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    case 3: convPixels<3, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    case 2: convPixels<2, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    case 1: convPixels<1, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    default: break;
+  }
+}
+
+}  // namespace
+
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
+             bool relu) {
+  if (ob + 1 < out.blocks) convRowImpl<true>(in, out, weights, bias, ob, y, relu);
+  else convRowImpl<false>(in, out, weights, bias, ob, y, relu);
+}
+
+}  // namespace VOXCONE_CONV_KERNEL_NAMESPACE
+#endif
+
+namespace generic {
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
+             bool relu);
+}
+namespace avx2 {
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
+             bool relu);
+}
+
+}  // namespace voxcone::denoise
