@@ -82,7 +82,9 @@ std::map<std::string, TzaTensor> parseTza(const std::vector<uint8_t>& bytes, con
   const int major = r.read<uint8_t>();
   r.read<uint8_t>();  // minor version
   if (major != 2) r.fail("version " + std::to_string(major) + " (only 2 is read)");
-  r.seek(r.read<uint64_t>());
+  // The tensors' data lies between the header and the table (as OIDN's writer places it).
+  const uint64_t table = r.read<uint64_t>();
+  r.seek(table);
   const uint32_t count = r.read<uint32_t>();
   std::map<std::string, TzaTensor> out;
   for (uint32_t i = 0; i < count; ++i) {
@@ -102,8 +104,8 @@ std::map<std::string, TzaTensor> parseTza(const std::vector<uint8_t>& bytes, con
     const uint64_t offset = r.read<uint64_t>();
     const size_t n = t.size();
     const size_t elementBytes = type == 'f' ? 4 : 2;
-    if (offset > bytes.size() || n > (bytes.size() - offset) / elementBytes)
-      r.fail("tensor '" + name + "' lies past the end");
+    if (offset < 12 || offset > table || n > (table - offset) / elementBytes)
+      r.fail("tensor '" + name + "' lies past the end of the data");
     t.values.resize(n);
     const uint8_t* p = bytes.data() + offset;
     for (size_t k = 0; k < n; ++k) {

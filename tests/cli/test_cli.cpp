@@ -336,6 +336,60 @@ TEST(Cli, LightSplitIsChosenAndRecorded) {
   EXPECT_NE(readImage((d / "0.exr").string()).pixels, readImage((d / "45.exr").string()).pixels);
 }
 
+TEST(Cli, DenoiseTakesTheRendersLayersAndRenderDenoiseGivesTheSameImage) {
+  // `denoise` finds the Albedo and Ns layers of `render --aov albedo,normal`; `render
+  // --denoise` runs the same network on the same beauty and layers, so the images are equal;
+  // its sidecar records the weights and the time, and it writes no layer it was not asked for.
+  if (!fs::exists(test::sourceDir() + "/data/models/oidn/rt_hdr_alb_nrm.tza"))
+    GTEST_SKIP() << "run tools/fetch_models.sh to fetch the denoiser's weights";
+  const fs::path d = freshDir("cli_denoise");
+  const std::string common = "render --method path -q --res 40x24 --spp 4 -o ";
+  ASSERT_EQ(run(common + (d / "raw").string() + " --aov albedo,normal").code, 0);
+  const RunResult den = run("denoise " + (d / "raw.exr").string() + " -o " + (d / "den.exr").string());
+  ASSERT_EQ(den.code, 0) << den.err;
+  const RunResult both = run(common + (d / "both").string() + " --denoise");
+  ASSERT_EQ(both.code, 0) << both.err;
+  const Image a = readImage((d / "den.exr").string()), b = readImage((d / "both.exr").string());
+  EXPECT_TRUE(a.pixels == b.pixels);
+  EXPECT_NE(a.pixels, readImage((d / "raw.exr").string()).pixels);
+  std::ifstream f(d / "both.json");
+  const nlohmann::json meta = nlohmann::json::parse(f);
+  EXPECT_EQ(meta["denoise"]["weights"], "rt_hdr_alb_nrm.tza");
+  EXPECT_GT(meta["timings"]["denoise_seconds"].get<double>(), 0.0);
+  EXPECT_FALSE(meta.contains("aovs"));
+  EXPECT_FALSE(readImageLayer((d / "both.exr").string(), "Albedo.").has_value());
+  // Colour alone: another network, another image.
+  ASSERT_EQ(run("denoise " + (d / "raw.exr").string() + " --aux none -o " + (d / "plain.exr").string()).code, 0);
+  EXPECT_NE(readImage((d / "plain.exr").string()).pixels, a.pixels);
+}
+
+TEST(Cli, DenoiseBadInputGivesOneLineAndNoOutput) {
+  const fs::path d = freshDir("cli_denoise_bad");
+  ASSERT_EQ(run("render --method path -q --res 16x16 --spp 1 -o " + (d / "raw").string()).code, 0);
+  const std::string raw = (d / "raw.exr").string(), out = (d / "out.exr").string();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"denoise " + (d / "missing.exr").string() + " -o " + out, "no such image file"},
+      {"denoise " + raw + " -o " + (d / "out.jpg").string(), "unknown extension"},
+      {"denoise " + raw + " -o " + out + " --normal " + raw, "needs --albedo"},
+      {"denoise " + raw + " -o " + out + " --weights " + (d / "none").string(), "fetch_models.sh"},
+      {"denoise " + (d / "raw.png").string() + " -o " + out, "8-bit"},
+      {"render --method path -q --res 16x16 --spp 1 --denoise-weights " + d.string() + " -o " + (d / "r2").string(),
+       "without --denoise"},
+      {"render --method path -q --res 16x16 --spp 1 --denoise --denoise-weights " + (d / "none").string() + " -o " +
+           (d / "r3").string(),
+       "fetch_models.sh"},
+  };
+  for (const auto& [args, says] : cases) {
+    const RunResult r = run(args);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_NE(r.err.find(says), std::string::npos) << args << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  }
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(d / "r2.exr"));
+  EXPECT_FALSE(fs::exists(d / "r3.exr"));
+}
+
 TEST(Cli, BadInputGivesOneLineAndNoOutput) {
   const fs::path d = freshDir("cli_bad");
   const std::string scenes = test::sourceDir() + "/data/scenes/";
