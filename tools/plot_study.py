@@ -25,7 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 COLOURS = {"path": "tab:gray", "pm": "tab:red", "voxcone": "tab:blue", "voxcone-auto": "tab:cyan",
-           "whitted": "tab:green"}
+           "whitted": "tab:green", "path+denoise": "black", "voxcone+denoise": "tab:purple"}
 
 
 def series(study):
@@ -217,10 +217,12 @@ def plot_speed_accuracy(study):
         c = COLOURS.get(method, "black")
         sizes = [12 + 120 * r / rss_max for r in m["peak_rss_mb"]]
         ax_err.scatter(m["seconds"], m["relmse"], s=sizes, color=c, alpha=0.55, label=method)
-        ax_err.plot(m["front_seconds"], m["front_relmse"], "-", color=c, lw=1.5)
+        # Denoised fronts dashed: the same method's colour family, the race against denoised path.
+        style = "--" if method.endswith("+denoise") else "-"
+        ax_err.plot(m["front_seconds"], m["front_relmse"], style, color=c, lw=1.5)
         psnr = [p if p is not None else math.nan for p in m["psnr"]]
         ax_psnr.scatter(m["seconds"], psnr, s=sizes, color=c, alpha=0.55, label=method)
-        ax_psnr.plot(m["front_seconds"], m["front_psnr"], "-", color=c, lw=1.5)
+        ax_psnr.plot(m["front_seconds"], m["front_psnr"], style, color=c, lw=1.5)
     ax_err.set_xscale("log")
     ax_err.set_yscale("log")
     ax_err.set_xlabel("total time (s)")

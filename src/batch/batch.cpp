@@ -35,7 +35,7 @@ namespace {
 /// Keys a job (or a grid entry, or the defaults) may set.
 const std::set<std::string> kJobKeys = {"name",    "scene",   "method", "spp",   "res",      "seed",
                                         "max_depth", "options", "accel",  "threads", "reference",
-                                        "target_error", "time_budget"};
+                                        "target_error", "time_budget", "denoise"};
 
 
 
@@ -77,6 +77,7 @@ std::string jobName(const nlohmann::json& spec) {
   if (spec.contains("threads")) name += "_t" + slug(spec["threads"]);
   if (spec.contains("target_error")) name += "_target" + slug(spec["target_error"]);
   if (spec.contains("time_budget")) name += "_budget" + slug(spec["time_budget"]);
+  if (spec.value("denoise", false)) name += "_denoise";
   for (const auto& [key, value] : spec["options"].items()) name += "_" + slug(key) + slug(value);
   if (name.size() > 120) name.resize(120);
   char hash[17];
@@ -113,6 +114,7 @@ void validateSpec(const nlohmann::json& spec, const std::string& where) {
     if (spec.contains(k) && !(spec[k].is_number() && spec[k].get<double>() > 0.0))
       throw SettingsError(where + "." + k + ": expected a positive number");
   if (spec.contains("method") && !spec["method"].is_string()) throw SettingsError(where + ".method: expected a string");
+  if (spec.contains("denoise") && !spec["denoise"].is_boolean()) throw SettingsError(where + ".denoise: expected true or false");
   if (spec.contains("res") && !spec["res"].is_string()) throw SettingsError(where + ".res: expected WIDTHxHEIGHT");
   // Before any job runs: every job's metrics would fail (they were recorded as "ok" with
   // empty metric columns).
@@ -254,6 +256,7 @@ JobResult runJob(const Job& job, const fs::path& outDir, const BatchSettings& o)
   if (s.contains("accel")) cmd += " --accel " + shellQuote(s["accel"].get<std::string>());
   if (s.contains("target_error")) cmd += " --target-error " + s["target_error"].dump();
   if (s.contains("time_budget")) cmd += " --time-budget " + s["time_budget"].dump();
+  if (s.value("denoise", false)) cmd += " --denoise";
   cmd += " 2>&1";
   std::string out;
   const int code = runCapture(cmd, out);

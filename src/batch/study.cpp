@@ -44,6 +44,10 @@ nlohmann::json sweepManifest(const SweepSettings& o) {
             {{"method", "pm"}, {"spp", 2}, {"options", {{"photons", {2000, 8000}}}}},
             {{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", {4, 5}}, {"photons", 4000}, {"cones", {6, 16}}}}},
             {{"method", "voxcone"}, {"target_error", 0.05}}};
+    if (o.denoise) {
+      grid.push_back({{"method", "path"}, {"spp", {1, 4}}, {"denoise", true}});
+      grid.push_back({{"method", "voxcone"}, {"spp", 2}, {"options", {{"level", 4}, {"photons", 4000}}}, {"denoise", true}});
+    }
   } else {
     grid = {{{"method", "path"}, {"spp", {4, 8, 16, 32, 64, 256, 1024}}},
             {{"method", "pm"}, {"spp", 16}, {"options", {{"photons", {100000, 300000, 1000000}}}}},
@@ -59,6 +63,13 @@ nlohmann::json sweepManifest(const SweepSettings& o) {
             // render --target-error / --time-budget: where its choices land against the fronts.
             {{"method", "voxcone"}, {"target_error", {0.002, 0.001, 0.0008}}},
             {{"method", "voxcone"}, {"time_budget", {0.5, 1, 2, 5}}}};
+    // The fair race (docs: the denoiser): both denoised, over spp; voxcone also with fewer
+    // photons, which the denoiser's smoothing may make enough.
+    if (o.denoise) {
+      grid.push_back({{"method", "path"}, {"spp", {1, 2, 4, 8, 16, 64}}, {"denoise", true}});
+      grid.push_back({{"method", "voxcone"}, {"spp", {1, 2, 4, 8, 16}}, {"denoise", true}});
+      grid.push_back({{"method", "voxcone"}, {"spp", {2, 4, 8}}, {"options", {{"photon_target", 50000}}}, {"denoise", true}});
+    }
   }
   return {{"reference", fs::absolute(o.referencePath).string()}, {"defaults", defaults}, {"grid", grid}};
 }
@@ -133,7 +144,8 @@ nlohmann::json sweepTable(const nlohmann::json& batchRows) {
     // Renders that chose their own settings (--target-error / --time-budget) are a series of
     // their own.
     const bool chosen = r.contains("target_error") || r.contains("time_budget");
-    const std::string method = r["method"].get<std::string>() + (chosen ? "-auto" : "");
+    const std::string method =
+        r["method"].get<std::string>() + (r.value("denoise", false) ? "+denoise" : "") + (chosen ? "-auto" : "");
     byMethod[method].push_back(rows.size());
     const nlohmann::json st = r.value("integrator", nlohmann::json::object());
     rows.push_back({{"name", r["name"]}, {"method", method}, {"spp", r.value("resolved_spp", r.value("spp", 0))}, {"options", r["options"]},
@@ -157,9 +169,9 @@ nlohmann::json sweepTable(const nlohmann::json& batchRows) {
       fronts[method].push_back(pts[k]);
     }
   }
-  // Equal-time and equal-error comparisons: each front point of pm and voxcone against path's front.
+  // Equal-time and equal-error comparisons: each front point of pm and voxcone against path's
+  // front, a denoised method's against denoised path's.
   nlohmann::json compare = nlohmann::json::array();
-  const auto& pathFront = fronts["path"];
   // A front inverted (error -> time): fronts are sorted by time, errors falling.
   auto inverted = [](const std::vector<std::pair<double, double>>& front) {
     std::vector<std::pair<double, double>> inv;
@@ -170,11 +182,15 @@ nlohmann::json sweepTable(const nlohmann::json& batchRows) {
   for (const nlohmann::json& r : rows) {
     // pm's and voxcone's front points; every render that chose its settings.
     const bool chosen = r["method"] == "voxcone-auto";
-    if ((!r["pareto"].get<bool>() && !chosen) || r["method"] == "path") continue;
+    const std::string method = r["method"].get<std::string>();
+    if ((!r["pareto"].get<bool>() && !chosen) || method == "path" || method == "path+denoise") continue;
+    const bool denoised = method.find("+denoise") != std::string::npos;
+    const auto& pathFront = fronts[denoised ? "path+denoise" : "path"];
     const double t = r["seconds"].get<double>(), e = r["relmse"].get<double>();
     const double pathErr = onFront(pathFront, t), pathTime = onFront(inverted(pathFront), e);
     nlohmann::json c = {{"name", r["name"]}, {"method", r["method"]}, {"seconds", t}, {"relmse", e},
                         {"psnr_srgb8", r["psnr_srgb8"]},
+                        {"against", denoised ? "path+denoise" : "path"},
                         {"path_relmse_at_equal_time", num(pathErr)}, {"path_seconds_at_equal_relmse", num(pathTime)},
                         {"speedup_vs_path", num(pathTime / t)}};
     if (chosen) {

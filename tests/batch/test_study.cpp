@@ -85,6 +85,43 @@ TEST(StudyLayer, SweepTableKeepsSuccessfulRendersAndComparesWithPathsFront) {
   EXPECT_EQ(c["name"], "v1");
   EXPECT_NEAR(c["path_relmse_at_equal_time"].get<double>(), 0.04, 1e-12);
   EXPECT_TRUE(c["path_seconds_at_equal_relmse"].is_null());
+  EXPECT_EQ(c["against"], "path");
+}
+
+TEST(StudyLayer, DenoisedRendersAreFrontsOfTheirOwnRacedAgainstDenoisedPath) {
+  auto row = [](const std::string& name, const std::string& method, bool denoise, double seconds, double relmse) {
+    nlohmann::json r = {{"name", name},
+                        {"status", "ok"},
+                        {"method", method},
+                        {"spp", 4},
+                        {"options", nlohmann::json::object()},
+                        {"timings", {{"total_seconds", seconds}}},
+                        {"metrics", {{"relmse", relmse}, {"mse", relmse}, {"psnr_srgb8", 30.0}}},
+                        {"peak_rss_bytes", 1e8}};
+    if (denoise) r["denoise"] = true;
+    return r;
+  };
+  nlohmann::json rows = nlohmann::json::array();
+  rows.push_back(row("p1", "path", false, 1.0, 0.08));
+  rows.push_back(row("p4", "path", false, 4.0, 0.02));
+  rows.push_back(row("pd1", "path", true, 1.0, 0.004));
+  rows.push_back(row("pd4", "path", true, 4.0, 0.001));
+  rows.push_back(row("vd", "voxcone", true, 2.0, 0.002));
+  const nlohmann::json t = sweepTable(rows);
+  EXPECT_EQ(t["rows"][2]["method"], "path+denoise");
+  EXPECT_EQ(t["rows"][4]["method"], "voxcone+denoise");
+  // One comparison (neither path front is compared with itself): against denoised path, whose
+  // relMSE at 2 s is sqrt(0.004 * 0.001) = 0.002 (log-log halfway), the time at 0.002 is 2 s.
+  ASSERT_EQ(t["comparisons"].size(), 1u);
+  const nlohmann::json& c = t["comparisons"][0];
+  EXPECT_EQ(c["against"], "path+denoise");
+  EXPECT_NEAR(c["path_relmse_at_equal_time"].get<double>(), 0.002, 1e-12);
+  EXPECT_NEAR(c["path_seconds_at_equal_relmse"].get<double>(), 2.0, 1e-9);
+  EXPECT_NEAR(c["speedup_vs_path"].get<double>(), 1.0, 1e-9);
+  // The batch runs it as render --denoise, and names it so.
+  Job job;
+  job.spec = {{"scene", "/s/box.json"}, {"method", "path"}, {"denoise", true}, {"options", nlohmann::json::object()}};
+  EXPECT_NE(jobName(job.spec).find("_denoise"), std::string::npos);
 }
 
 }  // namespace

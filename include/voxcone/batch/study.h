@@ -23,6 +23,9 @@ struct SweepSettings {
   std::string referencePath;
   std::string resolution;     ///< WIDTHxHEIGHT, the reference's
   bool quick = false;         ///< a few cheap settings (tests)
+  /// speed-accuracy: path and voxcone denoised too (`render --denoise`), each a front of its
+  /// own ("path+denoise", "voxcone+denoise"); the CLI sets it where the weights are fetched.
+  bool denoise = false;
   std::vector<int64_t> photons;  ///< levels: photon counts as a second axis (empty: the scene's)
 };
 
