@@ -10,9 +10,8 @@
 
 namespace voxcone::denoise {
 
-/// Channels per block: one 8-float vector (AVX2's width).
+/// Channels per block: one 8-float vector (AVX2's width), two of SSE's.
 constexpr int kBlock = 8;
-typedef float Vec8 __attribute__((vector_size(32)));
 
 /// A tensor's view for one convolution: `blocks` channel blocks of (h + 2) x (w + 2) pixels of
 /// kBlock floats (a zero border of one pixel all round), block b at data + b * blockStride.
@@ -37,18 +36,34 @@ namespace VOXCONE_CONV_KERNEL_NAMESPACE {
 
 namespace {
 
+/// The vector this kernel is built for: VOXCONE_CONV_LANES floats (8: AVX2; 4: SSE, where an
+/// 8-float vector was split so poorly that the kernel ran at 2.5 Gflop/s), a block in kParts.
+constexpr int kLanes = VOXCONE_CONV_LANES;
+constexpr int kParts = kBlock / kLanes;
+typedef float VecL __attribute__((vector_size(4 * kLanes)));
+
+/// s in every lane (not VecL{} + s: a sum with 0 the compiler must keep, for s = -0).
+inline VecL splat(float s) {
+#if VOXCONE_CONV_LANES == 8
+  return VecL{s, s, s, s, s, s, s, s};
+#else
+  return VecL{s, s, s, s};
+#endif
+}
+
 /// XB output pixels of two output blocks (or one, Two false) starting at x0.
 template <int XB, bool Two>
 inline void convPixels(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
                        int y, int x0, bool relu) {
-  constexpr bool two = Two;
-  Vec8 acc0[XB], acc1[XB];
-  Vec8 b0, b1 = {};
-  __builtin_memcpy(&b0, bias + size_t(ob) * kBlock, sizeof b0);
-  if constexpr (two) __builtin_memcpy(&b1, bias + size_t(ob + 1) * kBlock, sizeof b1);
-  for (int i = 0; i < XB; ++i) {
-    acc0[i] = b0;
-    acc1[i] = b1;
+  VecL acc0[XB][kParts], acc1[XB][kParts];
+  for (int p = 0; p < kParts; ++p) {
+    VecL b0, b1 = {};
+    __builtin_memcpy(&b0, bias + size_t(ob) * kBlock + size_t(p) * kLanes, sizeof b0);
+    if constexpr (Two) __builtin_memcpy(&b1, bias + size_t(ob + 1) * kBlock + size_t(p) * kLanes, sizeof b1);
+    for (int i = 0; i < XB; ++i) {
+      acc0[i][p] = b0;
+      acc1[i][p] = b1;
+    }
   }
   const size_t perOut = size_t(in.blocks) * 9 * kBlock * kBlock;
   const float* w0 = weights + size_t(ob) * perOut;
@@ -63,35 +78,40 @@ inline void convPixels(const TensorView& in, const TensorView& out, const float*
         const float* src = row + size_t(kx) * kBlock;
         const size_t wOff = ((size_t(ib) * 3 + size_t(ky)) * 3 + size_t(kx)) * kBlock * kBlock;
         for (int c = 0; c < kBlock; ++c) {
-          Vec8 wa, wb = {};
-          __builtin_memcpy(&wa, w0 + wOff + size_t(c) * kBlock, sizeof wa);
-          if constexpr (two) __builtin_memcpy(&wb, w1 + wOff + size_t(c) * kBlock, sizeof wb);
+          VecL wa[kParts], wb[kParts] = {};
+          for (int p = 0; p < kParts; ++p) {
+            __builtin_memcpy(&wa[p], w0 + wOff + size_t(c) * kBlock + size_t(p) * kLanes, sizeof(VecL));
+            if constexpr (Two) __builtin_memcpy(&wb[p], w1 + wOff + size_t(c) * kBlock + size_t(p) * kLanes, sizeof(VecL));
+          }
           for (int i = 0; i < XB; ++i) {
-            const float s = src[size_t(i) * kBlock + size_t(c)];
-            const Vec8 v = {s, s, s, s, s, s, s, s};
-            acc0[i] += v * wa;
-            if constexpr (two) acc1[i] += v * wb;
+            const VecL v = splat(src[size_t(i) * kBlock + size_t(c)]);
+            for (int p = 0; p < kParts; ++p) {
+              acc0[i][p] += v * wa[p];
+              if constexpr (Two) acc1[i][p] += v * wb[p];
+            }
           }
         }
       }
     }
   }
-  const Vec8 zero = {};
-  for (int i = 0; i < XB; ++i) {
-    if (relu) {
-      acc0[i] = acc0[i] > zero ? acc0[i] : zero;
-      acc1[i] = acc1[i] > zero ? acc1[i] : zero;
+  const VecL zero = {};
+  for (int i = 0; i < XB; ++i)
+    for (int p = 0; p < kParts; ++p) {
+      if (relu) {
+        acc0[i][p] = acc0[i][p] > zero ? acc0[i][p] : zero;
+        acc1[i][p] = acc1[i][p] > zero ? acc1[i][p] : zero;
+      }
+      __builtin_memcpy(out.pixel(ob, y, x0 + i) + p * kLanes, &acc0[i][p], sizeof(VecL));
+      if constexpr (Two) __builtin_memcpy(out.pixel(ob + 1, y, x0 + i) + p * kLanes, &acc1[i][p], sizeof(VecL));
     }
-    __builtin_memcpy(out.pixel(ob, y, x0 + i), &acc0[i], sizeof(Vec8));
-    if constexpr (two) __builtin_memcpy(out.pixel(ob + 1, y, x0 + i), &acc1[i], sizeof(Vec8));
-  }
 }
 
 template <bool Two>
 inline void convRowImpl(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
                         int y, bool relu) {
-  // 6 pixels x 2 blocks: 12 accumulators, 2 weight vectors and a broadcast in 16 registers.
-  constexpr int kX = 6;
+  // 2 blocks x kParts vectors x kX pixels: 12 accumulators, the weights and a broadcast in 16
+  // registers.
+  constexpr int kX = 6 / kParts;
   int x = 0;
   for (; x + kX <= out.w; x += kX) convPixels<kX, Two>(in, out, weights, bias, ob, y, x, relu);
   switch (out.w - x) {

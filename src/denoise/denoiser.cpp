@@ -103,11 +103,11 @@ struct Buffer {
   TensorView all() const { return view(0, blocks); }
 };
 
-denoise::ConvRowFn chooseConv() {
+denoise::ConvRowFn kernelByName(const std::string& name) {
 #if defined(__x86_64__) && defined(VOXCONE_DENOISE_AVX2)
-  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return denoise::avx2::convRow;
+  if (name == "avx2") return denoise::avx2::convRow;
 #endif
-  return denoise::generic::convRow;
+  return name == "generic" ? denoise::generic::convRow : nullptr;
 }
 
 void pool(const TensorView& in, const TensorView& out) {
@@ -139,7 +139,7 @@ void upsample(const TensorView& in, const TensorView& out) {
 /// One 3x3 convolution: weights repacked for conv_kernel.h ([ob][ib][ky][kx][i][o], the input's
 /// channels as the padded blocks of its concatenated parts), bias padded to whole blocks.
 struct Denoiser::Layer {
-  int inBlocks = 0, outBlocks = 0, outChannels = 0;
+  int inBlocks = 0, outBlocks = 0;
   bool relu = true;
   std::vector<float> weights, bias;
 };
@@ -150,7 +150,7 @@ std::string Denoiser::weightsFile(bool albedo, bool normal) {
 }
 
 Denoiser::Denoiser(const std::map<std::string, TzaTensor>& weights, int inputChannels)
-    : m_inputChannels(inputChannels) {
+    : m_inputChannels(inputChannels), m_kernel(kernels().front()) {
   if (inputChannels != 3 && inputChannels != 6 && inputChannels != 9)
     throw SettingsError("denoise: the network takes 3, 6 or 9 input channels, not " + std::to_string(inputChannels));
   int out[kLayerCount] = {};
@@ -163,6 +163,8 @@ Denoiser::Denoiser(const std::map<std::string, TzaTensor>& weights, int inputCha
     if (wt.layout != "oihw" || wt.dims.size() != 4 || wt.dims[2] != 3 || wt.dims[3] != 3)
       throw ImageError("denoiser weights: '" + name + ".weight' is not a 3x3 convolution (oihw)");
     out[id] = wt.dims[0];
+    if (wt.values.size() != wt.size() || b->second.values.size() != b->second.size())
+      throw ImageError("denoiser weights: '" + name + "' holds fewer values than its dimensions");
     if (b->second.dims != std::vector<int>{out[id]})
       throw ImageError("denoiser weights: '" + name + ".bias' does not match its " + std::to_string(out[id]) + " outputs");
     // The input's parts: the previous layer, or the upsampled layer and the encoder's skip.
@@ -182,7 +184,6 @@ Denoiser::Denoiser(const std::map<std::string, TzaTensor>& weights, int inputCha
                        std::to_string(inChannels) + " (a network for " + std::to_string(inputChannels) +
                        " input channels?)");
     auto layer = std::make_unique<Layer>();
-    layer->outChannels = out[id];
     layer->outBlocks = blocksFor(out[id]);
     layer->relu = true;  // every layer, dec_conv0 included, as OIDN 2 builds the RT U-Net
     // Padded input channel -> the file's input channel (-1: a zero channel of padding).
@@ -211,6 +212,21 @@ Denoiser::Denoiser(const std::map<std::string, TzaTensor>& weights, int inputCha
     m_layers.push_back(std::move(layer));
   }
   if (out[kDec0] != 3) throw ImageError("denoiser weights: dec_conv0 gives " + std::to_string(out[kDec0]) + " channels, not 3");
+}
+
+std::vector<std::string> Denoiser::kernels() {
+  std::vector<std::string> out;
+#if defined(__x86_64__) && defined(VOXCONE_DENOISE_AVX2)
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) out.push_back("avx2");
+#endif
+  out.push_back("generic");
+  return out;
+}
+
+void Denoiser::setKernel(const std::string& name) {
+  const std::vector<std::string> k = kernels();
+  if (std::find(k.begin(), k.end(), name) == k.end()) throw SettingsError("denoise: no kernel '" + name + "' on this CPU");
+  m_kernel = name;
 }
 
 Denoiser::~Denoiser() = default;
@@ -305,7 +321,7 @@ Image Denoiser::denoise(const Image& color, const Image* albedo, const Image* no
   if (timings) timings->input = timer.seconds();
   timer = Timer();
 
-  const denoise::ConvRowFn convRow = chooseConv();
+  const denoise::ConvRowFn convRow = kernelByName(m_kernel);
   const auto conv = [&](LayerId id, const TensorView& in, const TensorView& out) {
     const Layer& layer = *L[id];
     const int pairs = (layer.outBlocks + 1) / 2;

@@ -307,18 +307,22 @@ TEST(Denoiser, TheBlockedNetworkComputesThePlainUNet) {
     const auto weights = randomNetwork(channels, 17 + uint64_t(channels));
     const Image* albedo = channels >= 6 ? &in.albedo : nullptr;
     const Image* normal = channels == 9 ? &in.normal : nullptr;
-    const Image fast = Denoiser(weights, channels).denoise(in.color, albedo, normal);
     const Image plain = plainDenoise(weights, in.color, albedo, normal);
-    double worst = 0.0, sum = 0.0;
-    for (size_t p = 0; p < plain.pixels.size(); ++p)
-      for (int k = 0; k < 3; ++k) {
-        sum += plain.pixels[p][k];
-        worst = std::max(worst, double(std::abs(fast.pixels[p][k] - plain.pixels[p][k])) /
-                                    (1e-3 + std::abs(plain.pixels[p][k])));
-      }
-    // The sums differ only in rounding (float against double, FMA); the output is not trivial.
-    EXPECT_LT(worst, 1e-3) << channels << " channels";
-    EXPECT_GT(sum, 0.01 * double(plain.pixels.size())) << channels << " channels";
+    Denoiser d(weights, channels);
+    for (const std::string& kernel : Denoiser::kernels()) {
+      d.setKernel(kernel);
+      const Image fast = d.denoise(in.color, albedo, normal);
+      double worst = 0.0, sum = 0.0;
+      for (size_t p = 0; p < plain.pixels.size(); ++p)
+        for (int k = 0; k < 3; ++k) {
+          sum += plain.pixels[p][k];
+          worst = std::max(worst, double(std::abs(fast.pixels[p][k] - plain.pixels[p][k])) /
+                                      (1e-3 + std::abs(plain.pixels[p][k])));
+        }
+      // The sums differ only in rounding (float against double, FMA); the output is not trivial.
+      EXPECT_LT(worst, 1e-3) << channels << " channels, kernel " << kernel;
+      EXPECT_GT(sum, 0.01 * double(plain.pixels.size())) << channels << " channels";
+    }
   }
 }
 
@@ -349,6 +353,9 @@ TEST(Denoiser, WrongWeightsAndInputsAreErrors) {
   const Image small(8, 16);
   EXPECT_THROW(d.denoise(in.color, &in.albedo, &small), SettingsError);
   EXPECT_THROW(Denoiser::weightsFile(false, true), SettingsError);
+  Denoiser k(weights, 9);
+  EXPECT_THROW(k.setKernel("neon"), SettingsError);
+  EXPECT_EQ(k.kernel(), Denoiser::kernels().front());
   EXPECT_EQ(Denoiser::weightsFile(true, true), "rt_hdr_alb_nrm.tza");
   // Non-finite colour counts as black (as OIDN sanitizes it): the output stays finite.
   Image nan = in.color;

@@ -42,6 +42,12 @@ public:
   Denoiser& operator=(Denoiser&&) noexcept;
 
   int inputChannels() const { return m_inputChannels; }
+  /// The convolution kernels this CPU runs ("avx2" where it has AVX2 and FMA, "generic"), the
+  /// fastest first; a new Denoiser uses the first.
+  static std::vector<std::string> kernels();
+  /// Use kernel `name` (one of kernels(); else a SettingsError): the tests run each.
+  void setKernel(const std::string& name);
+  const std::string& kernel() const { return m_kernel; }
   /// The denoised colour. `albedo` and `normal` are given exactly where the network takes them
   /// (inputChannels 6: albedo; 9: both), of the colour's size. Non-finite inputs count as 0.
   Image denoise(const Image& color, const Image* albedo = nullptr, const Image* normal = nullptr,
@@ -56,6 +62,7 @@ public:
 
 private:
   int m_inputChannels = 0;
+  std::string m_kernel;
   std::vector<std::unique_ptr<Layer>> m_layers;
 };
 
