@@ -13,7 +13,9 @@ relMSE, PSNR (8-bit sRGB) and worst 4x4 cell (suite_table.py's metrics). Then th
   voxcone+denoise's time, the speed-up;
 - the fronts compared by PSNR: at each dB from the lowest both fronts reach to --top-db (or the
   highest both reach), each front's time (linear in dB, log in time, between its renders),
-  and whether voxcone+denoise's lies below path+denoise's.
+  and whether voxcone+denoise's lies below path+denoise's;
+- PSNR flatters a smooth image that is wrong in places (a denoiser's failure): per front, the
+  first render (by time) whose every 4x4 cell is within --cell-tol of the reference's mean.
 Writes OUTDIR/race.md, OUTDIR/race.json and OUTDIR/race.png (PSNR against time, one panel per
 scene, the four fronts) where matplotlib is installed. Read ratios within one run."""
 
@@ -71,6 +73,7 @@ def main():
     ap.add_argument("--voxcone-spp", default="1,2,4,8,16")
     ap.add_argument("--options", default="{}", help="voxcone options (JSON), raw and denoised")
     ap.add_argument("--top-db", type=float, default=40.0)
+    ap.add_argument("--cell-tol", type=float, default=0.05)
     ap.add_argument("--seed", type=int, help="the renders' seed (default: the scenes' own); the references' must differ")
     ap.add_argument("--regions", type=int, default=4)
     ap.add_argument("--bin", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "build", "voxcone"))
@@ -130,7 +133,11 @@ def main():
             by_db.append({"db": db, "voxcone_denoise_seconds": tv, "path_denoise_seconds": tp,
                           "ratio": tv / tp if tv and tp else None})
             db += 1.0
-        scenes.append({"scene": name, "reference": ref, "runs": runs, "by_db": by_db,
+        cells_ok = {}
+        for f in FRONTS:
+            ok = [p for p in sorted(runs[f], key=lambda p: p["seconds"]) if abs(p["worst_cell"] - 1.0) <= args.cell_tol]
+            cells_ok[f] = ok[0] if ok else None
+        scenes.append({"scene": name, "reference": ref, "runs": runs, "by_db": by_db, "cells_within": cells_ok,
                        "voxcone_denoise_below": all(b["ratio"] is not None and b["ratio"] < 1.0 for b in by_db)
                        if by_db else None})
 
@@ -147,6 +154,11 @@ def main():
             fmt = lambda v: "-" if v is None else "%.2f" % v  # noqa: E731
             lines.append("| %s | %.0f | %s | %s | %s |" % (s["scene"], b["db"], fmt(b["voxcone_denoise_seconds"]),
                                                           fmt(b["path_denoise_seconds"]), fmt(b["ratio"])))
+    lines += ["", "First render with every 4x4 cell within %g%% of the reference (spp, s, PSNR):" % (100 * args.cell_tol),
+              "", "| scene | " + " | ".join(FRONTS) + " |", "|---|" + "---:|" * len(FRONTS)]
+    for s in scenes:
+        cell = lambda p: "none" if p is None else "%d spp, %.2f s, %.1f dB" % (p["spp"], p["seconds"], p["psnr"])  # noqa: E731
+        lines.append("| %s | %s |" % (s["scene"], " | ".join(cell(s["cells_within"][f]) for f in FRONTS)))
     text = "\n".join(lines) + "\n"
     with open(os.path.join(args.outdir, "race.md"), "w") as f:
         f.write(text)

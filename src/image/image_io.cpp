@@ -771,17 +771,25 @@ DecodedImage readJpeg(const std::string& path) {
 
 }  // namespace
 
-std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix) {
+namespace {
+
+const unsigned char kExrMagic[4] = {0x76, 0x2f, 0x31, 0x01};
+
+/// The first 8 bytes of an image file (zeros past its end), which say its format.
+std::array<unsigned char, 8> fileMagic(const std::string& path) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) throw ImageError(path + ": no such image file");
-  unsigned char magic[4] = {};
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw ImageError(path + ": cannot open: " + std::strerror(errno));
-    in.read(reinterpret_cast<char*>(magic), sizeof(magic));
-  }
-  static const unsigned char kExr[4] = {0x76, 0x2f, 0x31, 0x01};
-  if (std::memcmp(magic, kExr, 4) != 0) return std::nullopt;
+  std::array<unsigned char, 8> magic{};
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ImageError(path + ": cannot open: " + std::strerror(errno));
+  in.read(reinterpret_cast<char*>(magic.data()), std::streamsize(magic.size()));
+  return magic;
+}
+
+}  // namespace
+
+std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix) {
+  if (std::memcmp(fileMagic(path).data(), kExrMagic, 4) != 0) return std::nullopt;
   const DecodedImage d = readExr(path);
   static const char* const kNames[2][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
   for (const auto& names : kNames) {
@@ -799,19 +807,12 @@ std::optional<Image> readImageLayer(const std::string& path, const std::string& 
 }
 
 Image readImage(const std::string& path) {
-  std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw ImageError(path + ": no such image file");
   // The format by the file's signature; the extension only names what a file should have been.
-  unsigned char magic[8] = {};
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw ImageError(path + ": cannot open: " + std::strerror(errno));
-    in.read(reinterpret_cast<char*>(magic), sizeof(magic));
-  }
+  const std::array<unsigned char, 8> bytes = fileMagic(path);
+  const unsigned char* magic = bytes.data();
   static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  static const unsigned char kExr[4] = {0x76, 0x2f, 0x31, 0x01};
   DecodedImage d;
-  if (std::memcmp(magic, kExr, 4) == 0) {
+  if (std::memcmp(magic, kExrMagic, 4) == 0) {
     d = readExr(path);
   } else if (std::memcmp(magic, kPng, 8) == 0) {
     d = readPng(path);
