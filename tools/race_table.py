@@ -5,6 +5,7 @@ exit, the image written; the median of --repeat runs for renders under 5 s).
 
     tools/race_table.py OUTDIR SCENE.json=REFERENCE.exr [...] [--threads N] [--repeat N]
                         [--path-spp 1,2,...] [--voxcone-spp 1,2,...] [--options JSON] [--top-db 40]
+    tools/race_table.py OUTDIR --replot      (the chart again from OUTDIR/race.json)
 
 Per scene and front (path, path+denoise, voxcone, voxcone+denoise): each render's wall time,
 relMSE, PSNR (8-bit sRGB) and worst 4x4 cell (suite_table.py's metrics). Then the race:
@@ -66,7 +67,8 @@ def front(points):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("outdir")
-    ap.add_argument("pairs", nargs="+", help="SCENE.json=REFERENCE.exr")
+    ap.add_argument("pairs", nargs="*", help="SCENE.json=REFERENCE.exr")
+    ap.add_argument("--replot", action="store_true", help="only draw OUTDIR/race.png from OUTDIR/race.json")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--path-spp", default="1,2,4,8,16,32,64")
@@ -78,6 +80,11 @@ def main():
     ap.add_argument("--regions", type=int, default=4)
     ap.add_argument("--bin", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "build", "voxcone"))
     args = ap.parse_args()
+    if args.replot:
+        with open(os.path.join(args.outdir, "race.json")) as f:
+            return plot(json.load(f)["scenes"], args.outdir)
+    if not args.pairs:
+        ap.error("give SCENE.json=REFERENCE.exr pairs (or --replot)")
     os.makedirs(args.outdir, exist_ok=True)
     ladders = {"path": [int(s) for s in args.path_spp.split(",")],
                "voxcone": [int(s) for s in args.voxcone_spp.split(",")]}
@@ -165,15 +172,25 @@ def main():
     with open(os.path.join(args.outdir, "race.json"), "w") as f:
         json.dump({"scenes": scenes, "threads": args.threads, "options": args.options}, f, indent=1)
     sys.stdout.write(text)
+    return plot(scenes, args.outdir)
+
+
+def plot(scenes, outdir):
+    """OUTDIR/race.png: PSNR against wall time per scene, the four fronts (needs matplotlib)."""
     try:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
+        print("race_table: no matplotlib, no chart", file=sys.stderr)
         return 0
     colours = {"path": "tab:gray", "path+denoise": "black", "voxcone": "tab:blue", "voxcone+denoise": "tab:purple"}
-    fig, axes = plt.subplots(1, len(scenes), figsize=(4.2 * len(scenes), 3.8), squeeze=False)
-    for ax, s in zip(axes[0], scenes):
+    cols = min(3, len(scenes))
+    rows = (len(scenes) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), squeeze=False)
+    for ax in axes.flat[len(scenes):]:
+        ax.set_visible(False)
+    for ax, s in zip(axes.flat, scenes):
         for f in FRONTS:
             pts = sorted(s["runs"][f], key=lambda p: p["seconds"])
             ax.plot([p["seconds"] for p in pts], [p["psnr"] for p in pts], "o--" if f.endswith("denoise") else "o-",
@@ -185,7 +202,7 @@ def main():
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(os.path.join(args.outdir, "race.png"), dpi=110)
+    fig.savefig(os.path.join(outdir, "race.png"), dpi=110)
     return 0
 
 
