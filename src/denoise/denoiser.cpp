@@ -263,6 +263,50 @@ float Denoiser::autoexposure(const Image& color) {
   return count > 0 ? float(kKey / std::exp2(logSum / count)) : 1.0f;
 }
 
+/// The network's tensors for one padded H0 x W0 image (Buffer's layout): the decoder's
+/// concatenations hold the encoder's skips as their last blocks, written there by the pooling,
+/// so a concatenation costs nothing. Their memory is one Arena.
+struct Denoiser::Plan {
+  Buffer cat1, a0, b0, out0, cat2, e2, d2a, d2b, cat3, e3, d3a, d3b, cat4, e4, d4a, d4b, p4, e5a, e5b;
+  Plan(const std::vector<std::unique_ptr<Layer>>& L, int inBlocks, int H0, int W0)
+      : cat1(L[kDec2b]->outBlocks + inBlocks, H0, W0),
+        a0(std::max(L[kEnc0]->outBlocks, L[kDec1a]->outBlocks), H0, W0),
+        b0(std::max(L[kEnc1]->outBlocks, L[kDec1b]->outBlocks), H0, W0),
+        out0(L[kDec0]->outBlocks, H0, W0),
+        cat2(L[kDec3b]->outBlocks + L[kEnc1]->outBlocks, H0 / 2, W0 / 2),
+        e2(L[kEnc2]->outBlocks, H0 / 2, W0 / 2),
+        d2a(L[kDec2a]->outBlocks, H0 / 2, W0 / 2),
+        d2b(L[kDec2b]->outBlocks, H0 / 2, W0 / 2),
+        cat3(L[kDec4b]->outBlocks + L[kEnc2]->outBlocks, H0 / 4, W0 / 4),
+        e3(L[kEnc3]->outBlocks, H0 / 4, W0 / 4),
+        d3a(L[kDec3a]->outBlocks, H0 / 4, W0 / 4),
+        d3b(L[kDec3b]->outBlocks, H0 / 4, W0 / 4),
+        cat4(L[kEnc5b]->outBlocks + L[kEnc3]->outBlocks, H0 / 8, W0 / 8),
+        e4(L[kEnc4]->outBlocks, H0 / 8, W0 / 8),
+        d4a(L[kDec4a]->outBlocks, H0 / 8, W0 / 8),
+        d4b(L[kDec4b]->outBlocks, H0 / 8, W0 / 8),
+        p4(L[kEnc4]->outBlocks, H0 / 16, W0 / 16),
+        e5a(L[kEnc5a]->outBlocks, H0 / 16, W0 / 16),
+        e5b(L[kEnc5b]->outBlocks, H0 / 16, W0 / 16) {}
+  std::vector<Buffer*> buffers() {
+    return {&cat1, &a0, &b0, &out0, &cat2, &e2, &d2a, &d2b, &cat3, &e3, &d3a, &d3b, &cat4, &e4, &d4a, &d4b, &p4, &e5a, &e5b};
+  }
+  size_t bytes() {
+    size_t floats = 0;
+    for (const Buffer* b : buffers()) floats += (b->floats() + 15) / 16 * 16;
+    return floats * sizeof(float);
+  }
+};
+
+size_t Denoiser::memoryBytes(int width, int height) const {
+  return Plan(m_layers, blocksFor(m_inputChannels), (height + 15) / 16 * 16, (width + 15) / 16 * 16).bytes();
+}
+
+void Denoiser::setTiling(int tile) {
+  if (tile < 0 || tile % 16 != 0) throw SettingsError("denoise: a tile is a multiple of 16 pixels");
+  m_tile = tile;
+}
+
 Image Denoiser::denoise(const Image& color, const Image* albedo, const Image* normal, DenoiseTimings* timings) const {
   const bool wantAlbedo = m_inputChannels >= 6, wantNormal = m_inputChannels == 9;
   if (wantAlbedo != (albedo != nullptr) || wantNormal != (normal != nullptr))
@@ -273,37 +317,67 @@ Image Denoiser::denoise(const Image& color, const Image* albedo, const Image* no
   const int H = color.height, W = color.width;
   Image result(W, H);
   if (H == 0 || W == 0) return result;
+  if (timings) *timings = DenoiseTimings();
+  // The exposure is the whole image's, whatever the tiles.
+  const float scale = autoexposure(color);
+  // Tiles: the whole image where its tensors fit kMaxMemory, else the largest square tile (a
+  // multiple of 16) whose window (the tile and kTileOverlap all round) does.
+  int tile = m_tile;
+  if (tile == 0 && memoryBytes(W, H) > kMaxMemory) {
+    tile = 256;
+    while (memoryBytes(tile + 16 + 2 * kTileOverlap, tile + 16 + 2 * kTileOverlap) <= kMaxMemory) tile += 16;
+  }
+  if (tile == 0 || (tile >= W && tile >= H)) {
+    run(color, albedo, normal, scale, result, timings);
+    return result;
+  }
+  // Each tile's window starts at a multiple of 16 and reaches kTileOverlap beyond the tile (the
+  // network's receptive radius is under it): its pooling grid is the whole image's, and every
+  // value the tile keeps is computed from the same inputs in the same order as without tiles.
+  const auto crop = [](const Image* img, int x0, int y0, int w, int h) {
+    Image out(w, h);
+    if (img)
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) out.at(x, y) = img->at(x0 + x, y0 + y);
+    return out;
+  };
+  for (int ty = 0; ty < H; ty += tile)
+    for (int tx = 0; tx < W; tx += tile) {
+      const int x0 = std::max(0, tx - kTileOverlap), y0 = std::max(0, ty - kTileOverlap);
+      const int x1 = std::min(W, tx + tile + kTileOverlap), y1 = std::min(H, ty + tile + kTileOverlap);
+      const Image c = crop(&color, x0, y0, x1 - x0, y1 - y0);
+      const Image a = crop(albedo, x0, y0, x1 - x0, y1 - y0), n = crop(normal, x0, y0, x1 - x0, y1 - y0);
+      Image out(x1 - x0, y1 - y0);
+      DenoiseTimings t;
+      run(c, albedo ? &a : nullptr, normal ? &n : nullptr, scale, out, &t);
+      if (timings) {
+        timings->input += t.input;
+        timings->network += t.network;
+        timings->output += t.output;
+      }
+      for (int y = ty; y < std::min(H, ty + tile); ++y)
+        for (int x = tx; x < std::min(W, tx + tile); ++x) result.at(x, y) = out.at(x - x0, y - y0);
+    }
+  return result;
+}
+
+void Denoiser::run(const Image& color, const Image* albedo, const Image* normal, float scale, Image& result,
+                   DenoiseTimings* timings) const {
+  const int H = color.height, W = color.width;
   Timer timer;
   const int H0 = (H + 15) / 16 * 16, W0 = (W + 15) / 16 * 16;
   const auto& L = m_layers;
   const int inBlocks = blocksFor(m_inputChannels);
-  // Buffers (Buffer's layout): the decoder's concatenations hold the encoder's skips as their
-  // last blocks, written there by the pooling, so a concatenation costs nothing.
-  Buffer cat1(L[kDec2b]->outBlocks + inBlocks, H0, W0);
-  Buffer a0(std::max(L[kEnc0]->outBlocks, L[kDec1a]->outBlocks), H0, W0);
-  Buffer b0(std::max(L[kEnc1]->outBlocks, L[kDec1b]->outBlocks), H0, W0);
-  Buffer out0(L[kDec0]->outBlocks, H0, W0);
-  Buffer cat2(L[kDec3b]->outBlocks + L[kEnc1]->outBlocks, H0 / 2, W0 / 2);
-  Buffer e2(L[kEnc2]->outBlocks, H0 / 2, W0 / 2);
-  Buffer d2a(L[kDec2a]->outBlocks, H0 / 2, W0 / 2), d2b(L[kDec2b]->outBlocks, H0 / 2, W0 / 2);
-  Buffer cat3(L[kDec4b]->outBlocks + L[kEnc2]->outBlocks, H0 / 4, W0 / 4);
-  Buffer e3(L[kEnc3]->outBlocks, H0 / 4, W0 / 4);
-  Buffer d3a(L[kDec3a]->outBlocks, H0 / 4, W0 / 4), d3b(L[kDec3b]->outBlocks, H0 / 4, W0 / 4);
-  Buffer cat4(L[kEnc5b]->outBlocks + L[kEnc3]->outBlocks, H0 / 8, W0 / 8);
-  Buffer e4(L[kEnc4]->outBlocks, H0 / 8, W0 / 8);
-  Buffer d4a(L[kDec4a]->outBlocks, H0 / 8, W0 / 8), d4b(L[kDec4b]->outBlocks, H0 / 8, W0 / 8);
-  Buffer p4(L[kEnc4]->outBlocks, H0 / 16, W0 / 16);
-  Buffer e5a(L[kEnc5a]->outBlocks, H0 / 16, W0 / 16), e5b(L[kEnc5b]->outBlocks, H0 / 16, W0 / 16);
-  Buffer* const buffers[] = {&cat1, &a0, &b0, &out0, &cat2, &e2, &d2a, &d2b, &cat3, &e3,
-                             &d3a, &d3b, &cat4, &e4, &d4a, &d4b, &p4, &e5a, &e5b};
-  size_t floats = 0;
-  for (const Buffer* b : buffers) floats += (b->floats() + 15) / 16 * 16;
-  Arena arena(floats * sizeof(float));
-  for (Buffer* b : buffers) b->data = arena.take(b->floats());
+  Plan plan(m_layers, inBlocks, H0, W0);
+  Arena arena(plan.bytes());
+  for (Buffer* b : plan.buffers()) b->data = arena.take(b->floats());
+  Buffer &cat1 = plan.cat1, &a0 = plan.a0, &b0 = plan.b0, &out0 = plan.out0, &cat2 = plan.cat2, &e2 = plan.e2;
+  Buffer &d2a = plan.d2a, &d2b = plan.d2b, &cat3 = plan.cat3, &e3 = plan.e3, &d3a = plan.d3a, &d3b = plan.d3b;
+  Buffer &cat4 = plan.cat4, &e4 = plan.e4, &d4a = plan.d4a, &d4b = plan.d4b, &p4 = plan.p4, &e5a = plan.e5a,
+         &e5b = plan.e5b;
 
   // The input: transformed colour, albedo, normal; zeros in the padding.
   const TensorView input = cat1.view(L[kDec2b]->outBlocks, inBlocks);
-  const float scale = autoexposure(color);
   tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const tbb::blocked_range<int>& r) {
     const float hi = std::numeric_limits<float>::max();
     for (int y = r.begin(); y != r.end(); ++y)
@@ -375,7 +449,6 @@ Image Denoiser::denoise(const Image& color, const Image* albedo, const Image* no
       }
   });
   if (timings) timings->output = timer.seconds();
-  return result;
 }
 
 }  // namespace voxcone

@@ -52,6 +52,16 @@ public:
   /// (inputChannels 6: albedo; 9: both), of the colour's size. Non-finite inputs count as 0.
   Image denoise(const Image& color, const Image* albedo = nullptr, const Image* normal = nullptr,
                 DenoiseTimings* timings = nullptr) const;
+  /// Bytes of the network's tensors for a width x height image (one tile's window when tiled).
+  size_t memoryBytes(int width, int height) const;
+  /// Images whose tensors would exceed kMaxMemory are denoised in square tiles, each run on a
+  /// window kTileOverlap pixels wider all round (more than the network's receptive radius,
+  /// about 110 pixels by its layers), so that the image is the same as without tiles.
+  static constexpr size_t kMaxMemory = size_t(1) << 30;
+  static constexpr int kTileOverlap = 128;
+  /// Tiles of `tile` pixels (a multiple of 16; 0: as kMaxMemory decides): the tests' way to tile
+  /// a small image.
+  void setTiling(int tile);
   /// The autoexposure scale OIDN applies to `color` before the transfer function.
   static float autoexposure(const Image& color);
   /// The PU transfer function (normalized: 65504 maps to 1) and its inverse.
@@ -59,10 +69,16 @@ public:
   static float puInverse(float x);
 
   struct Layer;  ///< one convolution's repacked weights (denoiser.cpp)
+  struct Plan;   ///< the tensors of one run (denoiser.cpp)
 
 private:
+  /// The network on the whole of `color` (a tile's window) with exposure `scale`, into `result`.
+  void run(const Image& color, const Image* albedo, const Image* normal, float scale, Image& result,
+           DenoiseTimings* timings) const;
+
   int m_inputChannels = 0;
   std::string m_kernel;
+  int m_tile = 0;
   std::vector<std::unique_ptr<Layer>> m_layers;
 };
 
