@@ -54,18 +54,22 @@ TEST(StudyLayer, LevelsTimesPhotonsIsAGridOfTwentyJobs) {
   EXPECT_EQ(expandManifest(m, "/").size(), 5u);
 }
 
+/// A batch result row as runJobs gives it: a 4-spp render of `method` that took `seconds` to
+/// `relmse`.
+nlohmann::json sweepRow(const std::string& name, const std::string& method, double seconds, double relmse) {
+  return nlohmann::json{{"name", name},
+                        {"status", "ok"},
+                        {"method", method},
+                        {"spp", 4},
+                        {"options", nlohmann::json::object()},
+                        {"timings", {{"total_seconds", seconds}}},
+                        {"metrics", {{"relmse", relmse}, {"mse", relmse}, {"psnr_srgb8", 30.0}}},
+                        {"peak_rss_bytes", 1e8},
+                        {"integrator", {{"photons", 1000}, {"level", 6}}}};
+}
+
 TEST(StudyLayer, SweepTableKeepsSuccessfulRendersAndComparesWithPathsFront) {
-  auto row = [](const std::string& name, const std::string& method, double seconds, double relmse) {
-    return nlohmann::json{{"name", name},
-                          {"status", "ok"},
-                          {"method", method},
-                          {"spp", 4},
-                          {"options", nlohmann::json::object()},
-                          {"timings", {{"total_seconds", seconds}}},
-                          {"metrics", {{"relmse", relmse}, {"mse", relmse}, {"psnr_srgb8", 30.0}}},
-                          {"peak_rss_bytes", 1e8},
-                          {"integrator", {{"photons", 1000}, {"level", 6}}}};
-  };
+  const auto row = sweepRow;
   nlohmann::json rows = nlohmann::json::array();
   rows.push_back(row("p1", "path", 1.0, 0.08));
   rows.push_back(row("p4", "path", 4.0, 0.02));
@@ -90,14 +94,7 @@ TEST(StudyLayer, SweepTableKeepsSuccessfulRendersAndComparesWithPathsFront) {
 
 TEST(StudyLayer, DenoisedRendersAreFrontsOfTheirOwnRacedAgainstDenoisedPath) {
   auto row = [](const std::string& name, const std::string& method, bool denoise, double seconds, double relmse) {
-    nlohmann::json r = {{"name", name},
-                        {"status", "ok"},
-                        {"method", method},
-                        {"spp", 4},
-                        {"options", nlohmann::json::object()},
-                        {"timings", {{"total_seconds", seconds}}},
-                        {"metrics", {{"relmse", relmse}, {"mse", relmse}, {"psnr_srgb8", 30.0}}},
-                        {"peak_rss_bytes", 1e8}};
+    nlohmann::json r = sweepRow(name, method, seconds, relmse);
     if (denoise) r["denoise"] = true;
     return r;
   };

@@ -422,14 +422,6 @@ Render pathRender(const Scene& scene, int spp, uint64_t seed) {
   return out;
 }
 
-double lum(const DVec3& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
-/// The 4x4 cell whose mean luminance is furthest from the reference's: |ratio - 1|.
-double worstCell(const Image& test, const Image& ref) {
-  double worst = 0.0;
-  for (const RegionError& c : regionErrors(test, ref, 4))
-    worst = std::max(worst, std::abs(lum(c.meanTest) / lum(c.meanReference) - 1.0));
-  return worst;
-}
 
 struct DenoiseCase {
   const char* scene;
@@ -453,7 +445,7 @@ TEST(DenoiserWeights, DenoisedPathGainsPsnrAndKeepsEveryCellsEnergy) {
       const Image den = d->denoise(r.color, &r.albedo, &r.normal);
       const double raw = compareImages(r.color, ref).psnrSrgb8, out = compareImages(den, ref).psnrSrgb8;
       EXPECT_GT(out - raw, spp == 4 ? c.gain4 : c.gain16) << c.scene << " at " << spp << " spp: " << raw << " -> " << out;
-      EXPECT_LT(worstCell(den, ref), spp == 4 ? 0.08 : 0.04) << c.scene << " at " << spp << " spp";
+      EXPECT_LT(test::worstCellDeviation(den, ref), spp == 4 ? 0.08 : 0.04) << c.scene << " at " << spp << " spp";
     }
   }
 }
@@ -481,7 +473,7 @@ TEST(DenoiserWeights, AConvergedImageStaysWithinItsNoise) {
   const double before = compareImages(r.color, ref).relMse;
   const Image den = d->denoise(r.color, &r.albedo, &r.normal);
   EXPECT_LT(compareImages(den, ref).relMse, before);
-  EXPECT_LT(worstCell(den, ref), 0.01);
+  EXPECT_LT(test::worstCellDeviation(den, ref), 0.01);
 }
 
 }  // namespace

@@ -233,15 +233,6 @@ Scene roomScene(const std::string& file, float degrees, bool turned, int spp) {
                     "room-sky", ".");
 }
 
-double lum(const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; }
-
-/// The largest relative difference of a 4 x 4 cell's mean luminance, `test` against `reference`.
-double worstCell(const Image& test, const Image& reference) {
-  double w = 0.0;
-  for (const RegionError& e : regionErrors(test, reference, 4))
-    w = std::max(w, std::fabs(lum(e.meanTest) / lum(e.meanReference) - 1.0));
-  return w;
-}
 
 TEST_F(EnvironmentFiles, ImportanceSamplingAgreesWithBsdfSamplingAndVoxconeWithPath) {
   // path with MIS (the map's sampler and the BSDF's) at 1024 spp against BSDF sampling alone at
@@ -253,7 +244,7 @@ TEST_F(EnvironmentFiles, ImportanceSamplingAgreesWithBsdfSamplingAndVoxconeWithP
   RenderSettings s = scene.render;
   s.spp = 4096;
   const Image bsdf = renderWith(scene, "path", s, {{"light_sampling", "none"}}).image;
-  EXPECT_LT(worstCell(bsdf, mis), 0.06);
+  EXPECT_LT(test::worstCellDeviation(bsdf, mis), 0.06);
   // voxcone (its default under a map, sky_light "auto": the sky by shadow rays; 40k photons,
   // 16 spp) against it: its worst cell erred by 4.2-8.1% over 6 seeds (4.1-9.0% at 64 spp: the
   // photons' share, fixed at 40k), 10% as asked. (sky_light "cones" point-samples the blob
@@ -262,7 +253,7 @@ TEST_F(EnvironmentFiles, ImportanceSamplingAgreesWithBsdfSamplingAndVoxconeWithP
   s.spp = 16;
   s.photons = 40000;
   const Image vc = renderWith(scene, "voxcone", s).image;
-  EXPECT_LT(worstCell(vc, mis), 0.10);
+  EXPECT_LT(test::worstCellDeviation(vc, mis), 0.10);
 }
 
 TEST_F(EnvironmentFiles, TurningTheSceneAndItsSkyTogetherChangesNothing) {
@@ -275,9 +266,9 @@ TEST_F(EnvironmentFiles, TurningTheSceneAndItsSkyTogetherChangesNothing) {
   const Scene scene = roomScene(sky, 0.0f, false, 256);
   const Image original = renderWith(scene, "path", scene.render).image;
   const Scene turned = roomScene(sky, 90.0f, true, 256);
-  EXPECT_LT(worstCell(renderWith(turned, "path", turned.render).image, original), 0.025);
+  EXPECT_LT(test::worstCellDeviation(renderWith(turned, "path", turned.render).image, original), 0.025);
   const Scene skyKept = roomScene(sky, 0.0f, true, 256);
-  EXPECT_GT(worstCell(renderWith(skyKept, "path", skyKept.render).image, original), 0.15);
+  EXPECT_GT(test::worstCellDeviation(renderWith(skyKept, "path", skyKept.render).image, original), 0.15);
 }
 
 /// A 4 x 4 floor (albedo 0.5, area 16) at y = 0 under `light`, nothing else.
@@ -464,7 +455,7 @@ TEST_F(EnvironmentFiles, AMitsubaSceneOfBitmapEnvmapDirectionalAndPlasticRenders
   const Image a = renderWith(json, "path", json.render).image;
   const Image b = renderWith(xml, "path", xml.render).image;
   for (const RegionError& c : regionErrors(b, a, 4))
-    EXPECT_NEAR(lum(c.meanTest) / lum(c.meanReference), 1.0, 1e-4) << "path, XML against JSON";
+    EXPECT_NEAR(test::luminance(c.meanTest) / test::luminance(c.meanReference), 1.0, 1e-4) << "path, XML against JSON";
   const std::vector<double> r = test::cellRatiosAgainstPath(xml);
   for (size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(r[i], 1.0, 0.13) << "voxcone on the XML, cell " << i;
 }

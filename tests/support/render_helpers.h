@@ -10,6 +10,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -47,6 +49,17 @@ inline size_t pixelsDifferingAcrossThreads(const Scene& scene, const std::string
   size_t diff = 0;
   for (size_t i = 0; i < images[0].pixels.size(); ++i) diff += images[0].pixels[i] != images[1].pixels[i];
   return diff;
+}
+
+/// Rec. 709 luminance.
+inline double luminance(const DVec3& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+
+/// The largest |ratio - 1| of a 4 x 4 cell's mean luminance, `test` against `reference`.
+inline double worstCellDeviation(const Image& test, const Image& reference) {
+  double w = 0.0;
+  for (const RegionError& e : regionErrors(test, reference, 4))
+    w = std::max(w, std::fabs(luminance(e.meanTest) / luminance(e.meanReference) - 1.0));
+  return w;
 }
 
 /// The canonical Cornell box of data/scenes.
