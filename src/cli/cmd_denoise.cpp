@@ -20,6 +20,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <tuple>
+#include <vector>
 
 namespace voxcone {
 
@@ -41,16 +43,6 @@ struct DenoiseArgs {
   int threads = 0;
 };
 
-/// An auxiliary image: the file given, else the input's own layer (aux "auto"), else none.
-std::optional<Image> auxImage(const DenoiseArgs& a, const std::string& file, const std::string& layer,
-                              const char* what) {
-  if (!file.empty()) return readImage(file);
-  if (a.aux != "auto") return std::nullopt;
-  std::optional<Image> img = readImageLayer(a.input, layer);
-  if (img) std::printf("denoise: the %s from %s's %s layer\n", what, a.input.c_str(), layer.c_str());
-  return img;
-}
-
 void runDenoise(const DenoiseArgs& a) {
   Timer total;
   const ThreadLimit threads(a.threads);
@@ -60,16 +52,21 @@ void runDenoise(const DenoiseArgs& a) {
   const Image color = readImage(a.input);
   if (color.displayEncoded)
     throw SettingsError(a.input + " is an 8-bit display image; the denoiser takes a linear HDR render (.exr)");
+  // The auxiliary images: the files given, else the input's own layers, read in one decode.
   std::optional<Image> albedo, normal;
   if (a.aux != "none") {
-    albedo = auxImage(a, a.albedo, "Albedo.", "albedo");
-    normal = auxImage(a, a.normal, "Ns.", "normal");
+    std::vector<std::optional<Image>> layers(2);
+    if (a.albedo.empty() || a.normal.empty()) layers = readImageLayers(a.input, {"Albedo.", "Ns."});
+    albedo = a.albedo.empty() ? std::move(layers[0]) : std::optional<Image>(readImage(a.albedo));
+    normal = a.normal.empty() ? std::move(layers[1]) : std::optional<Image>(readImage(a.normal));
   }
   if (a.aux == "albedo") normal.reset();
   if (normal && !albedo) {
     if (!a.normal.empty()) throw SettingsError("--normal needs --albedo too (OIDN has no normal-only filter)");
     normal.reset();
   }
+  for (const auto& [img, given, what] : {std::tuple{&albedo, &a.albedo, "albedo"}, std::tuple{&normal, &a.normal, "normal"}})
+    if (*img && given->empty()) std::printf("denoise: the %s from %s's layer\n", what, a.input.c_str());
   const LoadedDenoiser d = loadDenoiser(albedo.has_value(), normal.has_value(), a.weights);
   DenoiseTimings tm;
   const Image out = d.denoiser.denoise(color, albedo ? &*albedo : nullptr, normal ? &*normal : nullptr, &tm);

@@ -788,22 +788,25 @@ std::array<unsigned char, 8> fileMagic(const std::string& path) {
 
 }  // namespace
 
-std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix) {
-  if (std::memcmp(fileMagic(path).data(), kExrMagic, 4) != 0) return std::nullopt;
+std::vector<std::optional<Image>> readImageLayers(const std::string& path, const std::vector<std::string>& prefixes) {
+  std::vector<std::optional<Image>> out(prefixes.size());
+  if (std::memcmp(fileMagic(path).data(), kExrMagic, 4) != 0) return out;
   const DecodedImage d = readExr(path);
   static const char* const kNames[2][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
-  for (const auto& names : kNames) {
-    int at[3] = {-1, -1, -1};
-    for (int k = 0; k < 3; ++k)
-      for (size_t c = 0; c < d.names.size(); ++c)
-        if (d.names[c] == prefix + names[k]) at[k] = int(c);
-    if (at[0] < 0 || at[1] < 0 || at[2] < 0) continue;
-    Image out(d.width, d.height);
-    for (size_t p = 0; p < out.pixels.size(); ++p)
-      for (int k = 0; k < 3; ++k) out.pixels[p][k] = d.values[p * size_t(d.channels) + size_t(at[k])];
-    return out;
-  }
-  return std::nullopt;
+  for (size_t i = 0; i < prefixes.size(); ++i)
+    for (const auto& names : kNames) {
+      int at[3] = {-1, -1, -1};
+      for (int k = 0; k < 3; ++k)
+        for (size_t c = 0; c < d.names.size(); ++c)
+          if (d.names[c] == prefixes[i] + names[k]) at[k] = int(c);
+      if (at[0] < 0 || at[1] < 0 || at[2] < 0) continue;
+      Image img(d.width, d.height);
+      for (size_t p = 0; p < img.pixels.size(); ++p)
+        for (int k = 0; k < 3; ++k) img.pixels[p][k] = d.values[p * size_t(d.channels) + size_t(at[k])];
+      out[i] = std::move(img);
+      break;
+    }
+  return out;
 }
 
 Image readImage(const std::string& path) {

@@ -357,10 +357,15 @@ TEST(Cli, DenoiseTakesTheRendersLayersAndRenderDenoiseGivesTheSameImage) {
   EXPECT_EQ(meta["denoise"]["weights"], "rt_hdr_alb_nrm.tza");
   EXPECT_GT(meta["timings"]["denoise_seconds"].get<double>(), 0.0);
   EXPECT_FALSE(meta.contains("aovs"));
-  EXPECT_FALSE(readImageLayer((d / "both.exr").string(), "Albedo.").has_value());
-  // Colour alone: another network, another image.
+  EXPECT_FALSE(readImageLayers((d / "both.exr").string(), {"Albedo."})[0].has_value());
+  EXPECT_TRUE(readImageLayers((d / "raw.exr").string(), {"Albedo."})[0].has_value());
+  // Colour alone, colour and albedo: other networks, other images.
   ASSERT_EQ(run("denoise " + (d / "raw.exr").string() + " --aux none -o " + (d / "plain.exr").string()).code, 0);
-  EXPECT_NE(readImage((d / "plain.exr").string()).pixels, a.pixels);
+  ASSERT_EQ(run("denoise " + (d / "raw.exr").string() + " --aux albedo -o " + (d / "alb.exr").string()).code, 0);
+  const Image plain = readImage((d / "plain.exr").string()), alb = readImage((d / "alb.exr").string());
+  EXPECT_NE(plain.pixels, a.pixels);
+  EXPECT_NE(alb.pixels, a.pixels);
+  EXPECT_NE(alb.pixels, plain.pixels);
 }
 
 TEST(Cli, DenoiseBadInputGivesOneLineAndNoOutput) {

@@ -20,7 +20,9 @@ inline void expectOneLineImageError(const std::string& file, const std::string& 
     const std::string msg = e.what();
     EXPECT_NE(msg.find(file), std::string::npos) << msg;
     EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-    if (!mentions.empty()) EXPECT_NE(msg.find(mentions), std::string::npos) << msg;
+    if (!mentions.empty()) {
+      EXPECT_NE(msg.find(mentions), std::string::npos) << msg;
+    }
   }
 }
 

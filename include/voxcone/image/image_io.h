@@ -71,10 +71,11 @@ void writeImage(const std::string& path, const Image& image, const nlohmann::jso
 /// (PNG, JPEG) are converted to linear (sRGB, or a PNG's gAMA exponent). Throws ImageError with a
 /// one-line message when the file is missing, unreadable, truncated or of another format.
 Image readImage(const std::string& path);
-/// The three channels `prefix`R/G/B or `prefix`X/Y/Z (an AOV layer voxcone writes: "Albedo.",
-/// "Ns.") of an OpenEXR file as an image, or nullopt where the file has no such layer (or is
-/// not an EXR). Throws ImageError where the file cannot be read.
-std::optional<Image> readImageLayer(const std::string& path, const std::string& prefix);
+/// The three channels `prefix`R/G/B or `prefix`X/Y/Z of an OpenEXR file (AOV layers voxcone
+/// writes: "Albedo.", "Ns.") as images, one per prefix, from one decode of the file; nullopt
+/// where the file has no such layer (or is not an EXR). Throws ImageError where the file
+/// cannot be read.
+std::vector<std::optional<Image>> readImageLayers(const std::string& path, const std::vector<std::string>& prefixes);
 
 /// Write pretty JSON (2-space indent) atomically, or as part of `set`. Throws Error.
 void writeJsonAtomic(const std::string& path, const nlohmann::json& value, OutputSet* set = nullptr);
