@@ -79,7 +79,7 @@ def main():
     ap.add_argument("--seed", type=int, help="the renders' seed (default: the scenes' own); the references' must differ")
     ap.add_argument("--regions", type=int, default=4)
     ap.add_argument("--bin", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "build", "voxcone"))
-    args = ap.parse_args()
+    args = ap.parse_intermixed_args()  # options before, between or after the pairs
     if args.replot:
         with open(os.path.join(args.outdir, "race.json")) as f:
             return plot(json.load(f)["scenes"], args.outdir)
