@@ -143,6 +143,7 @@ void runRender(const RenderOptions& o) {
   if (o.denoise) {
     if (autoSettings) throw SettingsError("--denoise with --target-error / --time-budget is not supported");
     denoiser = loadDenoiser(true, true, o.denoiseWeights);
+    settings.denoise = true;
     for (Aov a : {Aov::Albedo, Aov::Normal})
       if (std::find(aovs.layers.begin(), aovs.layers.end(), a) == aovs.layers.end()) {
         aovs.layers.push_back(a);
@@ -281,6 +282,7 @@ void runRender(const RenderOptions& o) {
                       {"sampler", samplerNames()[size_t(settings.sampler)]},
                       {"light_sampler", settings.lightTree ? "tree" : "power"},
                       {"light_split", settings.lightTree ? settings.lightSplitDeg : 0.0f}, {"threads", threads.threads()},
+                      {"denoise", settings.denoise},
                       {"integrator", integrator->settingsJson()}};
   meta["seed"] = settings.seed;
   if (!result.layers.empty()) {

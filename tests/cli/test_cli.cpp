@@ -359,6 +359,12 @@ TEST(Cli, DenoiseTakesTheRendersLayersAndRenderDenoiseGivesTheSameImage) {
   EXPECT_FALSE(meta.contains("aovs"));
   EXPECT_FALSE(readImageLayers((d / "both.exr").string(), {"Albedo."})[0].has_value());
   EXPECT_TRUE(readImageLayers((d / "raw.exr").string(), {"Albedo."})[0].has_value());
+  // voxcone under the denoiser takes a quarter of its photons by default.
+  ASSERT_EQ(run("render --method voxcone -q --res 32x32 --spp 1 --denoise -o " + (d / "vd").string()).code, 0);
+  std::ifstream fv(d / "vd.json");
+  const nlohmann::json vd = nlohmann::json::parse(fv);
+  EXPECT_EQ(vd["settings"]["integrator"]["photon_target"], 50000);
+  EXPECT_EQ(vd["settings"]["denoise"], true);
   // Colour alone, colour and albedo: other networks, other images.
   ASSERT_EQ(run("denoise " + (d / "raw.exr").string() + " --aux none -o " + (d / "plain.exr").string()).code, 0);
   ASSERT_EQ(run("denoise " + (d / "raw.exr").string() + " --aux albedo -o " + (d / "alb.exr").string()).code, 0);

@@ -77,6 +77,9 @@ struct RenderSettings {
   /// / 1.52 s at 75 / 60 / 45 degrees. Path without splitting reaches 30.2 dB at about 38 spp,
   /// 4.2 s (between its 26.1 dB at 16 spp and 32.7 dB at 64 spp, 6.6 s).
   float lightSplitDeg = 45.0f;
+  /// The image goes through the denoiser (`render --denoise`): methods may choose cheaper
+  /// defaults whose noise it removes (voxcone's photon_target, voxel_cone/settings.cpp).
+  bool denoise = false;
   /// Throws SettingsError naming the offending value.
   void validate() const;
 };

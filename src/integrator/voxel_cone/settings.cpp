@@ -71,6 +71,11 @@ constexpr int kDefaultHitCacheStride = 8;
 /// suite, its held-out variants and the Cornell scenes within 4.4% (one seed), at 0.3-0.9 s more
 /// per render than 100k.
 constexpr int kDefaultPhotonTarget = 200000;
+/// With the denoiser after it (RenderSettings::denoise): a quarter of the photons. Measured with
+/// tools/race_table.py on the canonical and failure scenes (docs/studies/race): at 2-8 spp
+/// voxcone+denoise takes 0.6-0.8x the time for the same error, every 4x4 cell as before (within
+/// 0.01 of the default's).
+constexpr int kDenoisedPhotonTarget = 50000;
 /// The share of the second pass's photons emitted uniformly when the pilot guides it
 /// (EmissionGuide's floor: a photon weighs at most 1 / floor of an unguided one).
 constexpr double kDefaultGuideFloor = 0.25;
@@ -124,7 +129,8 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   p.maxDepth = std::max(1, render.maxDepth);
   if (!anyDelta || v.causticLevel == 0) p.causticPhotons = 0;
   const bool photonsGiven = r.has("photons") || render.photons > 0 || !out.fieldPath.empty();
-  out.photonTarget = uint64_t(r.integer("photon_target", photonsGiven ? 0 : kDefaultPhotonTarget, 0, kMaxInt));
+  const int target = render.denoise ? kDenoisedPhotonTarget : kDefaultPhotonTarget;
+  out.photonTarget = uint64_t(r.integer("photon_target", photonsGiven ? 0 : target, 0, kMaxInt));
   out.maxPhotons = uint64_t(r.integer("max_photons", kDefaultMaxPhotons, 1, kMaxInt));
   if (photonsGiven && out.photonTarget > 0)
     throw SettingsError("voxcone.photon_target: the photon count is given (photons); give one or the other");

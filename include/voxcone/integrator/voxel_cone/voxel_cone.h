@@ -79,7 +79,7 @@
 ///  - `photons`, `caustic_photons`: fixed counts (default: the scene's render.photons /
 ///    caustic_photons; without either, `photon_target` decides the global count and the caustic
 ///    count is kVoxconeDefaultCausticPhotons (20k));
-///  - `photon_target` (default 200000; 0: off, then kVoxconeDefaultPhotons (10k)): global
+///  - `photon_target` (default 200000, 50000 under `render --denoise`; 0: off, then kVoxconeDefaultPhotons (10k)): global
 ///    photons wanted in the cells the camera's gathers read; `max_photons` (default 2M) caps the
 ///    count that takes (a scene whose seen part gets a tiny share of the light: the sidecar's
 ///    stats say what was seen: seen_cells, seen_photons);
