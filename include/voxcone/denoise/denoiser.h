@@ -22,7 +22,7 @@ namespace voxcone {
 
 /// Where the time of one denoise() went (seconds).
 struct DenoiseTimings {
-  double input = 0.0;    ///< autoexposure, transfer function, padding
+  double input = 0.0;    ///< the transfer function into the padded tensor (after the exposure)
   double network = 0.0;  ///< the convolutions, pooling and upsampling
   double output = 0.0;   ///< the inverse transfer, cropping
 };

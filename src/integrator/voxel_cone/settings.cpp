@@ -73,8 +73,9 @@ constexpr int kDefaultHitCacheStride = 8;
 constexpr int kDefaultPhotonTarget = 200000;
 /// With the denoiser after it (RenderSettings::denoise): a quarter of the photons. Measured with
 /// tools/race_table.py on the canonical and failure scenes (docs/studies/race): at 2-8 spp
-/// voxcone+denoise takes 0.6-0.8x the time for the same error, every 4x4 cell as before (within
-/// 0.01 of the default's).
+/// voxcone+denoise takes 0.6-0.8x the time for the same error, its worst 4x4 cells within
+/// 0.966-1.040 of path's (0.965-1.038 at the default; glossy-room's 0.935 and many-lights' 0.88
+/// at 4 spp as at the default).
 constexpr int kDenoisedPhotonTarget = 50000;
 /// The share of the second pass's photons emitted uniformly when the pilot guides it
 /// (EmissionGuide's floor: a photon weighs at most 1 / floor of an unguided one).
