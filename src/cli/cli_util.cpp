@@ -4,6 +4,7 @@
 
 #include "voxcone/batch/process.h"
 #include "voxcone/core/error.h"
+#include "voxcone/denoise/tza.h"
 #include "voxcone/image/image_io.h"
 
 #include <nlohmann/json.hpp>
@@ -117,6 +118,16 @@ void runChartScript(const std::string& script, const std::string& studyJson, con
                           shellQuote(outStem) + " 2>&1";
   if (runCapture(cmd, out) != 0) throw Error("chart script failed: " + out.substr(0, out.find('\n')));
   std::printf("%s", out.c_str());
+}
+
+LoadedDenoiser loadDenoiser(bool albedo, bool normal, const std::string& weightsDir) {
+  const std::string file = Denoiser::weightsFile(albedo, normal);
+  const std::string dir = weightsDir.empty() ? dataPath("data/models/oidn") : weightsDir;
+  const std::string path = dir + "/" + file;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw SettingsError("denoiser weights " + path + " not found (bash tools/fetch_models.sh fetches them)");
+  return {Denoiser(readTza(path), albedo ? (normal ? 9 : 6) : 3), path};
 }
 
 }  // namespace voxcone

@@ -62,7 +62,7 @@ std::string dataPath(const std::string& relative);
 
 /// The denoiser for the auxiliary images given (Denoiser::weightsFile) read from `weightsDir`,
 /// or data/models/oidn where empty, and the file it came from; missing weights are a
-/// SettingsError that names the fetch script (cmd_denoise.cpp).
+/// SettingsError that names the fetch script.
 struct LoadedDenoiser {
   Denoiser denoiser;
   std::string weightsPath;

@@ -1,7 +1,7 @@
 /// \file cmd_denoise.cpp
 /// `voxcone denoise IN.exr -o OUT.exr`: Open Image Denoise's RT network (denoise/denoiser.h) on
 /// a render, with the albedo and normal layers `render --aov albedo,normal` writes beside it
-/// (or given as files), else the colour alone. Also the loader `render --denoise` shares.
+/// (or given as files), else the colour alone.
 
 #include "cli_util.h"
 #include "commands.h"
@@ -24,16 +24,6 @@
 #include <vector>
 
 namespace voxcone {
-
-LoadedDenoiser loadDenoiser(bool albedo, bool normal, const std::string& weightsDir) {
-  const std::string file = Denoiser::weightsFile(albedo, normal);
-  const std::string dir = weightsDir.empty() ? dataPath("data/models/oidn") : weightsDir;
-  const std::string path = dir + "/" + file;
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw SettingsError("denoiser weights " + path + " not found (bash tools/fetch_models.sh fetches them)");
-  return {Denoiser(readTza(path), albedo ? (normal ? 9 : 6) : 3), path};
-}
 
 namespace {
 

@@ -27,9 +27,10 @@ struct TensorView {
 
 /// One output row pair of blocks: out blocks ob and ob + 1 (where ob + 1 < out.blocks) of row y,
 /// from all of in's blocks. Weights are [out block][in block][ky][kx][in channel][out channel]
-/// (kBlock x kBlock floats per (ob, ib, ky, kx)); bias per output channel. relu: max(0, x).
+/// (kBlock x kBlock floats per (ob, ib, ky, kx)); bias per output channel; then ReLU, max(0, x)
+/// (every layer of the RT network has it, dec_conv0 included, as OIDN 2 builds it).
 using ConvRowFn = void (*)(const TensorView& in, const TensorView& out, const float* weights, const float* bias,
-                           int ob, int y, bool relu);
+                           int ob, int y);
 
 #ifdef VOXCONE_CONV_KERNEL_NAMESPACE
 namespace VOXCONE_CONV_KERNEL_NAMESPACE {
@@ -54,7 +55,7 @@ inline VecL splat(float s) {
 /// XB output pixels of two output blocks (or one, Two false) starting at x0.
 template <int XB, bool Two>
 inline void convPixels(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
-                       int y, int x0, bool relu) {
+                       int y, int x0) {
   VecL acc0[XB][kParts], acc1[XB][kParts];
   for (int p = 0; p < kParts; ++p) {
     VecL b0, b1 = {};
@@ -97,10 +98,8 @@ inline void convPixels(const TensorView& in, const TensorView& out, const float*
   const VecL zero = {};
   for (int i = 0; i < XB; ++i)
     for (int p = 0; p < kParts; ++p) {
-      if (relu) {
-        acc0[i][p] = acc0[i][p] > zero ? acc0[i][p] : zero;
-        acc1[i][p] = acc1[i][p] > zero ? acc1[i][p] : zero;
-      }
+      acc0[i][p] = acc0[i][p] > zero ? acc0[i][p] : zero;
+      acc1[i][p] = acc1[i][p] > zero ? acc1[i][p] : zero;
       __builtin_memcpy(out.pixel(ob, y, x0 + i) + p * kLanes, &acc0[i][p], sizeof(VecL));
       if constexpr (Two) __builtin_memcpy(out.pixel(ob + 1, y, x0 + i) + p * kLanes, &acc1[i][p], sizeof(VecL));
     }
@@ -108,40 +107,37 @@ inline void convPixels(const TensorView& in, const TensorView& out, const float*
 
 template <bool Two>
 inline void convRowImpl(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob,
-                        int y, bool relu) {
+                        int y) {
   // 2 blocks x kParts vectors x kX pixels: 12 accumulators, the weights and a broadcast in 16
   // registers.
   constexpr int kX = 6 / kParts;
   int x = 0;
-  for (; x + kX <= out.w; x += kX) convPixels<kX, Two>(in, out, weights, bias, ob, y, x, relu);
+  for (; x + kX <= out.w; x += kX) convPixels<kX, Two>(in, out, weights, bias, ob, y, x);
   switch (out.w - x) {
-    case 5: convPixels<5, Two>(in, out, weights, bias, ob, y, x, relu); break;
-    case 4: convPixels<4, Two>(in, out, weights, bias, ob, y, x, relu); break;
-    case 3: convPixels<3, Two>(in, out, weights, bias, ob, y, x, relu); break;
-    case 2: convPixels<2, Two>(in, out, weights, bias, ob, y, x, relu); break;
-    case 1: convPixels<1, Two>(in, out, weights, bias, ob, y, x, relu); break;
+    case 5: convPixels<5, Two>(in, out, weights, bias, ob, y, x); break;
+    case 4: convPixels<4, Two>(in, out, weights, bias, ob, y, x); break;
+    case 3: convPixels<3, Two>(in, out, weights, bias, ob, y, x); break;
+    case 2: convPixels<2, Two>(in, out, weights, bias, ob, y, x); break;
+    case 1: convPixels<1, Two>(in, out, weights, bias, ob, y, x); break;
     default: break;
   }
 }
 
 }  // namespace
 
-void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
-             bool relu) {
-  if (ob + 1 < out.blocks) convRowImpl<true>(in, out, weights, bias, ob, y, relu);
-  else convRowImpl<false>(in, out, weights, bias, ob, y, relu);
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y) {
+  if (ob + 1 < out.blocks) convRowImpl<true>(in, out, weights, bias, ob, y);
+  else convRowImpl<false>(in, out, weights, bias, ob, y);
 }
 
 }  // namespace VOXCONE_CONV_KERNEL_NAMESPACE
 #endif
 
 namespace generic {
-void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
-             bool relu);
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y);
 }
 namespace avx2 {
-void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y,
-             bool relu);
+void convRow(const TensorView& in, const TensorView& out, const float* weights, const float* bias, int ob, int y);
 }
 
 }  // namespace voxcone::denoise

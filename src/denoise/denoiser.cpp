@@ -140,7 +140,6 @@ void upsample(const TensorView& in, const TensorView& out) {
 /// channels as the padded blocks of its concatenated parts), bias padded to whole blocks.
 struct Denoiser::Layer {
   int inBlocks = 0, outBlocks = 0;
-  bool relu = true;
   std::vector<float> weights, bias;
 };
 
@@ -185,7 +184,6 @@ Denoiser::Denoiser(const std::map<std::string, TzaTensor>& weights, int inputCha
                        " input channels?)");
     auto layer = std::make_unique<Layer>();
     layer->outBlocks = blocksFor(out[id]);
-    layer->relu = true;  // every layer, dec_conv0 included, as OIDN 2 builds the RT U-Net
     // Padded input channel -> the file's input channel (-1: a zero channel of padding).
     std::vector<int> source;
     int base = 0;
@@ -401,7 +399,7 @@ void Denoiser::run(const Image& color, const Image* albedo, const Image* normal,
     const int pairs = (layer.outBlocks + 1) / 2;
     tbb::parallel_for(tbb::blocked_range<int>(0, pairs * out.h), [&](const tbb::blocked_range<int>& r) {
       for (int t = r.begin(); t != r.end(); ++t)
-        convRow(in, out, layer.weights.data(), layer.bias.data(), 2 * (t / out.h), t % out.h, layer.relu);
+        convRow(in, out, layer.weights.data(), layer.bias.data(), 2 * (t / out.h), t % out.h);
     });
   };
   const auto view = [](const Buffer& b, int blocks) { return b.view(0, blocks); };

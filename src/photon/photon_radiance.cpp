@@ -249,10 +249,11 @@ bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const V
   return false;
 }
 
-Vec3 PhotonRadiance::reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& wo) const {
+Vec3 PhotonRadiance::reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& woWorld) const {
   if (m_photons.empty()) return Vec3(0.0f);
   Material textured;
-  const Lobe lobe{&m_scene->materialAt(hit, textured), Frame(hit.shadingNormal), wo};
+  const Frame frame(hit.shadingNormal);
+  const Lobe lobe{&m_scene->materialAt(hit, textured), frame, frame.toLocal(woWorld)};
   return irradianceAt(hit.position, hit.positionError, side, nullptr, 0, &lobe);
 }
 

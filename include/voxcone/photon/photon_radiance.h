@@ -79,11 +79,11 @@ public:
   /// (Oren-Nayar surfaces taken as Lambertian); zero on surfaces that are not diffuse
   /// (Material::isDiffuse), as the field holds them.
   Vec3 radiance(const SurfaceHit& hit, const Vec3& side) const;
-  /// Outgoing radiance towards wo (unit, local to the frame of hit's shading normal) on side
+  /// Outgoing radiance towards woWorld (unit, world space) on side
   /// `side` of any non-delta hit: the same filtered estimate, each photon weighted by the BSDF,
   /// sum f(wo, wi_p) Phi_p / (pi r^2 covered) (Jensen 2001, eq. 7.6: for photons that ended on
   /// glossy surfaces, whose reflection depends on where they came from).
-  Vec3 reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& wo) const;
+  Vec3 reflected(const SurfaceHit& hit, const Vec3& side, const Vec3& woWorld) const;
   /// Bytes held (photons, the cache and their trees).
   size_t memoryBytes() const;
   /// Entries of the precomputed irradiance, and how many of them lookups have estimated so far.
@@ -110,8 +110,8 @@ private:
   /// With `lobe`, each photon's power weighted by the BSDF towards the lobe's wo (reflected()).
   struct Lobe {
     const Material* material;
-    Frame frame;
-    Vec3 wo;
+    Frame frame;  ///< the hit's shading frame
+    Vec3 wo;      ///< in it
   };
   Vec3 irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius = nullptr,
                     int skipStride = 0, const Lobe* lobe = nullptr) const;

@@ -336,7 +336,7 @@ Vec3 VoxelConeIntegrator::shade(const SurfaceHit& sh, const Vec3& woWorld, Sampl
   // The photons' estimate changes little across a pixel: taken on the gathering samples only,
   // weighted as the cones' gathers are (on every sample it cost 25% of glossy-room's time).
   if (m_glossyCausticByPhotons && m_settings.view == View::Full && gatherWeight > 0.0f)
-    caustic = gatherWeight * m_glossyCaustics.reflected(sh, ng, wo);
+    caustic = gatherWeight * m_glossyCaustics.reflected(sh, ng, woWorld);
   return result();
 }
 
