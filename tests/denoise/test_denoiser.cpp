@@ -451,12 +451,12 @@ TEST(DenoiserWeights, DenoisedPathGainsPsnrAndKeepsEveryCellsEnergy) {
 }
 
 /// The published network's tensors: 1024 x 1024 runs in one piece, 3840 x 2160 in tiles
-/// (`voxcone denoise` measured: 1024 x 1024 at 0.90 GB peak RSS, 3840 x 2160 at 1.5 GB where in
+/// (`voxcone denoise` measured: 1024 x 1024 at 1.31 GB peak RSS, 3840 x 2160 at 2.0 GB where in
 /// one piece its tensors alone would take 8 GB).
 TEST(DenoiserWeights, LargeImagesAreTiledUnderTheMemoryBudget) {
   const Denoiser* d = fetchedDenoiser();
   if (!d) GTEST_SKIP() << "run tools/fetch_models.sh to fetch the denoiser's weights";
-  EXPECT_LT(d->memoryBytes(1024, 1024), Denoiser::kMaxMemory + (Denoiser::kMaxMemory >> 1));
+  EXPECT_LE(d->memoryBytes(1024, 1024), Denoiser::kMaxMemory) << d->memoryBytes(1024, 1024);
   EXPECT_GT(d->memoryBytes(3840, 2160), Denoiser::kMaxMemory);
   EXPECT_LT(d->memoryBytes(256, 256), size_t(100) << 20);
 }
