@@ -264,9 +264,14 @@ Vec3 PhotonRadiance::radiance(const SurfaceHit& hit, const Vec3& side) const {
   if (!mat.hasDiffuseBase()) return Vec3(0.0f);
   // Diffuse reflection of the irradiance: albedo / pi (Oren-Nayar taken as Lambertian here, a
   // coated base by its reflectance through the coat, diffuseReflectance).
+  return diffuseReflectance(mat) * kInvPi * irradiance(hit, side);
+}
+
+Vec3 PhotonRadiance::irradiance(const SurfaceHit& hit, const Vec3& side) const {
+  if (m_photons.empty()) return Vec3(0.0f);
   Vec3 e;
   if (!cachedIrradiance(hit.position, hit.positionError, side, e)) e = irradianceAt(hit.position, hit.positionError, side);
-  return diffuseReflectance(mat) * kInvPi * e;
+  return e;
 }
 
 }  // namespace voxcone

@@ -9,6 +9,7 @@
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/photon/emission_guide.h"
+#include "voxcone/photon/light_proximity.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
@@ -77,6 +78,9 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
   // True while every bounce so far was a delta (specular) one; with at least one bounce, a
   // diffuse hit then ends a path L S+ D (a caustic).
   bool specularOnly = true;
+  // The near share of the last diffuse surface the photon left (Photon::nearShare).
+  float nearShare = 0.0f;
+  const LightProximity* proximity = pass == Pass::Global ? settings.proximity.get() : nullptr;
   for (int segment = 1; segment <= settings.maxDepth; ++segment) {
     SurfaceHit sh;
     if (!intersectSurface(scene, accel, ray, sh)) return;  // escaped the scene
@@ -94,7 +98,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
       // there (bsdfSample fails below), so its back never lights the field.
       if (mat.blackFrom(glm::dot(sh.shadingNormal, woWorld))) return;
       const bool caustic = specularOnly && segment > 1;
-      if (pass == Pass::Global ? !caustic : caustic) {
+      if ((pass == Pass::Global ? !caustic : caustic)) {
         Photon ph;
         ph.position = pos;
         ph.power = power;
@@ -102,11 +106,13 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
         ph.incident = woWorld;
         ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
         ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));
+        ph.nearShare = nearShare;
         out.push_back(ph);
         if (bins) bins->push_back(bin);
       }
       // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.
       if (pass == Pass::Caustic) return;
+      if (proximity) nearShare = 1.0f - proximity->coneShare(pos);
     } else if (pass == Pass::Caustic && !mat.isDelta()) {
       // A rough (glossy) bounce can never lead to L S+ D: the path ends here, kept where it
       // arrived after specular bounces only (L S+ G).

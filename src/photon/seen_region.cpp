@@ -17,6 +17,23 @@ namespace voxcone {
 namespace {
 /// Delta bounces followed from the camera before giving up on a ray.
 constexpr int kMaxDeltaBounces = 8;
+
+/// The first non-delta surface along `ray` and the strongest lobe of each mirror or glass met
+/// (`ray` ends as the last segment followed); false where none is met.
+bool firstDiffuseHit(const Scene& scene, const Accel& accel, Ray& ray, SurfaceHit& sh) {
+  for (int bounce = 0; bounce <= kMaxDeltaBounces; ++bounce) {
+    if (!intersectSurface(scene, accel, ray, sh)) return false;
+    const Material& m = scene.materials[sh.material];
+    if (!m.isDelta()) return true;
+    const Frame frame(sh.shadingNormal);
+    DeltaLobe lobes[2];
+    const int n = bsdfDeltaLobes(m, frame.toLocal(-glm::normalize(ray.dir)), lobes);
+    if (n == 0) return false;
+    const int best = n == 2 && maxComponent(lobes[1].weight) > maxComponent(lobes[0].weight) ? 1 : 0;
+    ray = spawnRay(sh.position, sh.positionError, sh.geomNormal, frame.toWorld(lobes[best].wi));
+  }
+  return false;
+}
 }  // namespace
 
 uint64_t SeenRegion::keyOf(const Vec3& worldPos) const {
@@ -34,30 +51,14 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
                        int raysY, int gathers)
     : m_cellSize(cellSize), m_origin(scene.bounds().lo) {
   std::vector<std::vector<uint64_t>> rows(size_t(std::max(raysY, 0)));
-  const int strata = std::max(1, int(std::lround(std::sqrt(double(gathers)))));
+  const int strata = gathers > 0 ? std::max(1, int(std::lround(std::sqrt(double(gathers))))) : 0;
   tbb::parallel_for(0, raysY, [&](int y) {
     std::vector<uint64_t>& out = rows[size_t(y)];
     for (int x = 0; x < raysX; ++x) {
       Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
                                          (float(y) + 0.5f) / float(raysY) * float(height), width, height);
-      // The first non-delta surface along the strongest lobe of each mirror or glass met.
       SurfaceHit sh;
-      bool found = false;
-      for (int bounce = 0; bounce <= kMaxDeltaBounces; ++bounce) {
-        if (!intersectSurface(scene, accel, ray, sh)) break;
-        const Material& m = scene.materials[sh.material];
-        if (!m.isDelta()) {
-          found = true;
-          break;
-        }
-        const Frame frame(sh.shadingNormal);
-        DeltaLobe lobes[2];
-        const int n = bsdfDeltaLobes(m, frame.toLocal(-glm::normalize(ray.dir)), lobes);
-        if (n == 0) break;
-        const int best = n == 2 && maxComponent(lobes[1].weight) > maxComponent(lobes[0].weight) ? 1 : 0;
-        ray = spawnRay(sh.position, sh.positionError, sh.geomNormal, frame.toWorld(lobes[best].wi));
-      }
-      if (!found) continue;
+      if (!firstDiffuseHit(scene, accel, ray, sh)) continue;
       out.push_back(keyOf(sh.position));
       // Gathers from the side the camera sees: a stratified cosine-distributed set.
       const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
@@ -75,6 +76,52 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
   for (const std::vector<uint64_t>& r : rows) m_keys.insert(m_keys.end(), r.begin(), r.end());
   std::sort(m_keys.begin(), m_keys.end());
   m_keys.erase(std::unique(m_keys.begin(), m_keys.end()), m_keys.end());
+}
+
+double SeenRegion::meanGatherDistance(const Scene& scene, const Accel& accel, int width, int height, int raysX,
+                                      int raysY, int gathers) {
+  const int strata = std::max(1, int(std::lround(std::sqrt(double(gathers)))));
+  std::vector<double> sums(size_t(std::max(raysY, 0)), 0.0), counts(sums.size(), 0.0);
+  tbb::parallel_for(0, raysY, [&](int y) {
+    for (int x = 0; x < raysX; ++x) {
+      Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
+                                         (float(y) + 0.5f) / float(raysY) * float(height), width, height);
+      SurfaceHit sh;
+      if (!firstDiffuseHit(scene, accel, ray, sh)) continue;
+      const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
+      const Frame frame(ng);
+      for (int i = 0; i < strata * strata; ++i) {
+        const Vec2 u((float(i % strata) + 0.5f) / float(strata), (float(i / strata) + 0.5f) / float(strata));
+        const Ray g = spawnRay(sh.position, sh.positionError, ng, frame.toWorld(sampleCosineHemisphere(u)));
+        SurfaceHit gh;
+        if (!intersectSurface(scene, accel, g, gh)) continue;
+        sums[size_t(y)] += double(glm::length(gh.position - sh.position));
+        counts[size_t(y)] += 1.0;
+      }
+    }
+  });
+  double sum = 0.0, count = 0.0;
+  for (size_t i = 0; i < sums.size(); ++i) sum += sums[i], count += counts[i];
+  return count > 0.0 ? sum / count : 0.0;
+}
+
+void SeenRegion::dilate() {
+  std::vector<uint64_t> grown;
+  grown.reserve(m_keys.size() * 27);
+  constexpr uint64_t kAxis = (uint64_t(1) << 21) - 1;
+  for (const uint64_t k : m_keys) {
+    const int64_t c[3] = {int64_t(k >> 42), int64_t((k >> 21) & kAxis), int64_t(k & kAxis)};
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
+          if (x < 0 || y < 0 || z < 0 || x > int64_t(kAxis) || y > int64_t(kAxis) || z > int64_t(kAxis)) continue;
+          grown.push_back(uint64_t(x) << 42 | uint64_t(y) << 21 | uint64_t(z));
+        }
+  }
+  std::sort(grown.begin(), grown.end());
+  grown.erase(std::unique(grown.begin(), grown.end()), grown.end());
+  m_keys = std::move(grown);
 }
 
 bool SeenRegion::contains(const Vec3& worldPos) const {

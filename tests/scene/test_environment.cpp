@@ -451,7 +451,6 @@ TEST_F(EnvironmentFiles, AMitsubaSceneOfBitmapEnvmapDirectionalAndPlasticRenders
   EXPECT_EQ(floor.type, MaterialType::Plastic);
   EXPECT_GE(floor.albedoTexture, 0);
   EXPECT_EQ(xml.materials[xml.triMaterial.back()].type, MaterialType::RoughPlastic);
-  const auto lum = [](const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; };
   const Image a = renderWith(json, "path", json.render).image;
   const Image b = renderWith(xml, "path", xml.render).image;
   for (const RegionError& c : regionErrors(b, a, 4))

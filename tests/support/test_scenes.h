@@ -48,6 +48,48 @@ inline PhotonSettings photonSettings(uint64_t photons, uint64_t caustic, int max
   return s;
 }
 
+/// The six faces of the box [lo, hi] as JSON quads of `material`, their normals outward (or
+/// inward, for a room).
+inline std::string boxQuads(const Vec3& lo, const Vec3& hi, const std::string& material, bool inward) {
+  std::string out;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      Vec3 c[4];
+      for (int k = 0; k < 4; ++k) {
+        c[k][axis] = side ? hi[axis] : lo[axis];
+        c[k][u] = (k == 1 || k == 2) ? hi[u] : lo[u];
+        c[k][v] = (k >= 2) ? hi[v] : lo[v];
+      }
+      // (c0, c1, c2) winds to +axis (u x v); the outward normal of the low face is -axis.
+      const bool reverse = (side == 0) != inward;
+      if (!out.empty()) out += ",\n";
+      out += R"({"type": "quad", "material": ")" + material + R"(", "vertices": [)";
+      for (int k = 0; k < 4; ++k) out += (k ? ", " : "") + jsonVec(c[reverse ? 3 - k : k]);
+      out += "]}";
+    }
+  return out;
+}
+
+/// A closed 2 m room (Lambertian 0.7) lit only by a 0.6 x 0.6 x 0.04 m lamp box (emission 10,
+/// albedo 0.8) hanging `gap` under the ceiling, with a red block on the floor; the camera, at
+/// `size` x `size` pixels, looks away from the lamp. The ceiling above the lamp is lit to many
+/// times anything else and seen only through the gap.
+inline Scene lampUnderCeilingScene(float gap, int size, int spp) {
+  const std::string json = R"({
+    "camera": {"position": [1, 1.1, 0.2], "target": [0.8, 1.2, 2], "up": [0, 1, 0], "fov_y_deg": 70},
+    "render": {"width": )" + std::to_string(size) + R"(, "height": )" + std::to_string(size) + R"(, "spp": )" +
+                           std::to_string(spp) + R"(, "max_depth": 16},
+    "materials": {"wall": {"type": "lambertian", "albedo": 0.7}, "red": {"type": "lambertian", "albedo": [0.7, 0.2, 0.2]},
+                  "lamp": {"type": "lambertian", "albedo": 0.8, "emission": 10}},
+    "shapes": [)" + boxQuads(Vec3(0.0f), Vec3(2.0f), "wall", true) + ",\n" +
+                           boxQuads(Vec3(0.7f, 2.0f - gap - 0.04f, 0.3f), Vec3(1.3f, 2.0f - gap, 0.9f), "lamp", false) +
+                           ",\n" + boxQuads(Vec3(0.2f, 0.0f, 1.2f), Vec3(0.7f, 0.6f, 1.7f), "red", false) + R"(],
+    "lights": []
+  })";
+  return parseScene(json, "lamp-under-ceiling", ".");
+}
+
 /// Solid angle of the rectangle [x0, x1] x [z0, z1] in the plane y = 0 seen from (0, h, 0):
 /// the corner function atan(x z / (h sqrt(x^2 + z^2 + h^2))) summed with signs.
 inline double rectangleSolidAngle(double x0, double x1, double z0, double z1, double h) {

@@ -79,6 +79,8 @@ public:
   /// (Oren-Nayar surfaces taken as Lambertian); zero on surfaces that are not diffuse
   /// (Material::isDiffuse), as the field holds them.
   Vec3 radiance(const SurfaceHit& hit, const Vec3& side) const;
+  /// The irradiance estimate itself (W / m^2 per channel) on side `side` of `hit`, any surface.
+  Vec3 irradiance(const SurfaceHit& hit, const Vec3& side) const;
   /// Outgoing radiance towards woWorld (unit, world space) on side
   /// `side` of any non-delta hit: the same filtered estimate, each photon weighted by the BSDF,
   /// sum f(wo, wi_p) Phi_p / (pi r^2 covered) (Jensen 2001, eq. 7.6: for photons that ended on

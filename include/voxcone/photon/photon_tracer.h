@@ -19,6 +19,7 @@ namespace voxcone {
 class Scene;
 class Accel;
 class EmissionGuide;
+class LightProximity;
 
 /// A photon stored at a diffuse surface hit.
 struct Photon {
@@ -32,6 +33,9 @@ struct Photon {
   /// Scattering events between the light and this hit, saturating at 255: 0 for a photon
   /// straight from a light (direct light, which photon mapping takes from shadow rays).
   uint8_t bounces = 0;
+  /// With PhotonSettings::proximity: 1 - coneShare of the last diffuse surface it left (the
+  /// share of the light leaving there that cones leave to photons, LightProximity), else 0.
+  float nearShare = 0.0f;
 };
 
 /// voxcone's photons when the scene names none. Measured with voxcone's defaults (256x256,
@@ -73,6 +77,9 @@ struct PhotonSettings {
   std::shared_ptr<const EmissionGuide> guide;
   /// With a guide: PhotonMaps::globalBins names the guide's bin of each global photon's emission.
   bool recordBins = false;
+  /// Where given, each global photon records the near share of the last diffuse surface it left
+  /// (Photon::nearShare).
+  std::shared_ptr<const LightProximity> proximity;
 };
 
 /// Statistics of one tracing run.

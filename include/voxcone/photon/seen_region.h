@@ -24,15 +24,22 @@ public:
   /// Cells of size `cellSize` (world units, > 0) holding the first non-delta hit of a
   /// `raysX` x `raysY` grid of camera rays over a `width` x `height` image (delta surfaces
   /// followed along their strongest lobe, up to 8 bounces), and the hits of `gathers`
-  /// cosine-distributed rays from each of those points (the side the camera sees).
+  /// cosine-distributed rays from each of those points (the side the camera sees; none for 0).
   /// Deterministic (no randomness; any thread count).
   SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX = 64,
              int raysY = 64, int gathers = 16);
+  /// Add every cell's 26 neighbours: the region then holds every point within a cell of a seen one.
+  void dilate();
   /// Whether worldPos lies in a seen cell.
   bool contains(const Vec3& worldPos) const;
   /// Photons of `photons` in seen cells that bounced at least `minBounces` times.
   uint64_t count(const std::vector<Photon>& photons, int minBounces = 0) const;
   size_t cells() const { return m_keys.size(); }
+  /// The mean distance from the surfaces a `raysX` x `raysY` grid of camera rays first meets
+  /// (through mirrors and glass) to what `gathers` cosine-distributed rays from each hit (rays
+  /// that leave the scene left out): how far a gather's cones reach. 0 where none hits.
+  static double meanGatherDistance(const Scene& scene, const Accel& accel, int width, int height, int raysX = 32,
+                                   int raysY = 32, int gathers = 16);
   float cellSize() const { return m_cellSize; }
 
 private:

@@ -7,6 +7,7 @@
 #include "voxcone/core/rng.h"
 #include "voxcone/integrator/whitted.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
+#include "voxcone/photon/light_proximity.h"
 #include "voxcone/photon/photon_radiance.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
@@ -19,8 +20,9 @@
 namespace voxcone {
 
 ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& s,
-                       const PhotonRadiance* photons)
+                       const PhotonRadiance* photons, const LightProximity* proximity)
     : m_scene(scene), m_accel(accel), m_field(field), m_photons(s.hitPhotons ? photons : nullptr),
+      m_proximity(m_photons && proximity && !proximity->empty() ? proximity : nullptr),
       m_coneStep(s.coneStep), m_maxDistance(s.maxDistance), m_exactSegment(s.exactSegment),
       m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect) {
   const std::vector<int> levels = m_field.levels();
@@ -62,20 +64,26 @@ namespace {
 constexpr float kHitLightClamp = 0.25f;
 }  // namespace
 
-Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const {
+Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU,
+                             bool nearSplit) const {
   if (m_photons) {
+    // Beside a lamp the cone takes its share of the hit's light, the photons that left it the rest
+    // (LightProximity); its lamps then need no clamp: within the radius the share falls as d^2.
+    const float share = nearSplit && m_proximity ? m_proximity->coneShare(hit.surface.position) : 1.0f;
+    if (!(share > 0.0f)) return Vec3(0.0f);
+    const float clamp = nearSplit && m_proximity ? 0.0f : kHitLightClamp * v;
     Vec3 L = m_photons->radiance(hit.surface, hit.side);
     if (m_hitDirect && m_scene.materials[hit.surface.material].hasDiffuseBase()) {
       // The lamps and suns by one sample, the sky by another: chosen together by power, a sky
       // seen through a window took most samples and left each lamp's few a large weight
       // (tools/make_gltf_room.py's room with its lamp 0.4 m under the ceiling: a bright blotch
-      // wherever a cone's hit drew the lamp, 32x32 blocks up to 2.2x path; 0.92-1.10 after). A
-      // lamp nearer the hit than kHitLightClamp v counts as that far: the hit stands for the
-      // cone's footprint, and a light point a millimetre away gave one sample a weight of
-      // thousands (the room with its lamp 2 cm under the ceiling: blocks up to 2.6x Cycles at
-      // some seeds; clamped at 0.25 v, within 0.85-1.18 at four seeds and the image 1% darker,
-      // at 0.5 v 2% darker).
-      L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU, false, kHitLightClamp * v);
+      // wherever a cone's hit drew the lamp, 32x32 blocks up to 2.2x path; 0.92-1.10 after).
+      // Without near_light a lamp nearer the hit than kHitLightClamp v counts as that far: the
+      // hit stands for the cone's footprint, and a light point a millimetre away gave one sample
+      // a weight of thousands (the room with its lamp 2 cm under the ceiling: blocks up to 2.6x
+      // Cycles at some seeds; clamped at 0.25 v, within 0.85-1.18 at four seeds and the image 1%
+      // darker, at 0.5 v 2% darker).
+      L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU, false, clamp);
       if (m_scene.environment) {
         // The sky's pair: the lamps' shifted by irrational steps (a Cranley-Patterson rotation),
         // so the two samples of one hit do not share their point.
@@ -83,14 +91,14 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
         L += environmentLightSample(m_scene, m_accel, hit.surface, -d, skyU);
       }
     }
-    return L;
+    return share * L;
   }
   return m_field.coneSample(hit.surface.position + hit.side * (0.5f * v), float(m_finest) - std::log2(v / m_v0), d, apex)
       .radiance;
 }
 
 Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU,
-                                  int depth, Vec3* deltaLight) const {
+                                  int depth, Vec3* deltaLight, bool nearSplit) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   Material textured;
   const Material& m = m_scene.materialAt(sh, textured);
@@ -104,13 +112,14 @@ Vec3 ConeTracer::continueSpecular(const SurfaceHit& sh, const Vec3& d, float tan
     const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
     Vec3 found(0.0f);
     L += lobes[i].weight * trace(sh.position, sh.positionError, side, wi, tanHalf, lightU, depth + 1, false, nullptr,
-                                 deltaLight ? &found : nullptr);
+                                 deltaLight ? &found : nullptr, nearSplit);
     if (deltaLight) *deltaLight += lobes[i].weight * found;
   }
   return L;
 }
 
-Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth) const {
+Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth,
+                                bool nearSplit) const {
   if (depth + 1 > kMaxSpecularDepth) return Vec3(0.0f);
   Material textured;
   const Material& m = m_scene.materialAt(sh, textured);
@@ -129,13 +138,14 @@ Vec3 ConeTracer::continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2&
   if (!bsdfSample(m, frame.toLocal(-d), uc, u, bs) || isBlack(bs.weight)) return L;
   const Vec3 wi = frame.toWorld(bs.wi);
   const Vec3 side = glm::dot(sh.geomNormal, wi) > 0.0f ? sh.geomNormal : -sh.geomNormal;
-  L += bs.weight * trace(sh.position, sh.positionError, side, wi, std::max(m.roughness, 0.01f), nextLightU, depth + 1);
+  L += bs.weight * trace(sh.position, sh.positionError, side, wi, std::max(m.roughness, 0.01f), nextLightU, depth + 1,
+                         false, nullptr, nullptr, nearSplit);
   return L;
 }
 
 Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf,
                        const Vec2& lightU, int depth, bool sky, std::optional<SurfaceHit>* axisHit,
-                       Vec3* deltaLight) const {
+                       Vec3* deltaLight, bool nearSplit) const {
   const float cosPhi = glm::dot(n, d);
   if (!(cosPhi > 0.0f)) return Vec3(0.0f);  // below the tangent plane: nothing to gather
   const float vMax = float(m_field.voxelSize(m_coarsest));
@@ -163,10 +173,10 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
       return sky ? m_scene.escapedSky(d) : Vec3(0.0f);
     }
     const Material& hm = m_scene.materials[hit->surface.material];
-    if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth, deltaLight);
+    if (hm.isDelta()) return continueSpecular(hit->surface, d, tanHalf, lightU, depth, deltaLight, nearSplit);
     if (throughDelta) *deltaLight += m_scene.emitted(hit->surface, -d);
-    if (m_photons && !hm.hasDiffuseBase()) return continueGlossy(hit->surface, d, lightU, depth);
-    return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU);
+    if (m_photons && !hm.hasDiffuseBase()) return continueGlossy(hit->surface, d, lightU, depth, nearSplit);
+    return hitRadiance(*hit, d, apex, std::clamp(lookupSize(hit->t), m_v0, vMax), lightU, nearSplit);
   }
   // Exact visibility along the axis for the first segment (leak mitigation).
   if (m_exactSegment > 0.0f) {
@@ -175,9 +185,9 @@ Vec3 ConeTracer::trace(const Vec3& p, const Vec3& pError, const Vec3& n, const V
       // A mirror or glass passes on what its exact reflected and refracted cones gather;
       // elsewhere the finest level around the hit, half a voxel towards the ray's side.
       if (m_scene.materials[hit->surface.material].isDelta())
-        hitLight = continueSpecular(hit->surface, d, tanHalf, lightU, depth);
+        hitLight = continueSpecular(hit->surface, d, tanHalf, lightU, depth, nullptr, false);
       else
-        hitLight = hitRadiance(*hit, d, apex, m_v0, lightU);
+        hitLight = hitRadiance(*hit, d, apex, m_v0, lightU, false);
       // March only the part of the cone before the surface: lookups whose reach (kClearance v)
       // stays in front of it.
       tEnd = std::min(tEnd, hit->t);

@@ -168,6 +168,10 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
   out.hitEstimate.cacheStride = r.integer("hit_cache", kDefaultHitCacheStride, 0, 4096);
+  out.nearLight = r.has("near_light") ? float(r.number("near_light", 0.0, 0.0, 1e30))
+                                      : (out.hitGather && out.hitPhotons ? kNearLightAuto : 0.0f);
+  if (out.nearLight > 0.0f && !(out.hitGather && out.hitPhotons))
+    throw SettingsError("voxcone.near_light: needs gather = \"hit\" and hit_radiance = \"photons\"");
   const std::string view = r.choice("view", viewNames());
   out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
   r.finish();
@@ -207,6 +211,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"hit_photons", hitEstimate.k},
           {"hit_radius", hitEstimate.maxRadius},
           {"hit_cache", hitEstimate.cacheStride},
+          {"near_light", nearLight == kNearLightAuto ? nlohmann::json("auto") : nlohmann::json(nearLight)},
           {"view", viewNames()[size_t(view)]},
           {"field", fieldPath}};
 }

@@ -11,6 +11,7 @@
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/whitted.h"
 #include "voxcone/photon/emission_guide.h"
+#include "voxcone/photon/light_proximity.h"
 #include "voxcone/photon/seen_region.h"
 #include "voxcone/scene/bsdf.h"
 
@@ -26,6 +27,8 @@ namespace voxcone {
 namespace {
 /// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
 constexpr double kGuidePerBin = 8.0;
+/// near_light's default radius, per unit of the mean distance a gather's rays travel.
+constexpr double kNearLightScale = 0.25;
 
 /// Point i of an n-point Hammersley set ((i + 1/2) / n, the radical inverse of i) shifted by
 /// `shift` and wrapped into [0, 1)^2 (a Cranley-Patterson rotation): the numbers of a gather's
@@ -138,12 +141,32 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   return maps;
 }
 
+std::vector<Photon> VoxelConeIntegrator::nearPhotons(const PhotonMaps& maps) const {
+  std::vector<Photon> near;
+  if (!m_proximity) return near;
+  // Estimated only at gathering points, the surfaces the camera sees (through mirrors and
+  // glass): the photons within a search radius of them (most of those that left a lamp's
+  // surroundings stay there: 323k of 895k in tools/make_gltf_room.py's room, bouncing in the
+  // 2 cm between its lamp and the ceiling).
+  SeenRegion visible(m_scene, m_accel, m_scene.render.width, m_scene.render.height, m_settings.hitEstimate.maxRadius,
+                     m_scene.render.width, m_scene.render.height, 0);
+  visible.dilate();
+  for (const Photon& p : maps.global)
+    if (p.nearShare > 0.0f && visible.contains(p.position)) {
+      near.push_back(p);
+      near.back().power *= p.nearShare;
+    }
+  return near;
+}
+
 void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   Timer total;
   if (!m_settings.fieldPath.empty() && !keepVoxels) {
     // A field read back (voxelize -o): its light, its settings; no photons traced.
     m_tracer.reset();
     m_hitPhotons = PhotonRadiance();
+    m_nearPhotons = PhotonRadiance();
+    m_proximity.reset();
     m_field = VoxelField::read(m_settings.fieldPath);
     m_field.checkScene(m_scene, m_settings.fieldPath);
     const uint64_t budget = m_settings.voxel.memoryBudgetBytes;
@@ -159,6 +182,17 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     startTracer();
     return;
   }
+  if (m_settings.nearLight != 0.0f && !m_proximity) {
+    Timer t;
+    const float radius = m_settings.nearLight > 0.0f ? m_settings.nearLight
+                                                     : float(kNearLightScale * SeenRegion::meanGatherDistance(
+                                                                                   m_scene, m_accel, m_scene.render.width,
+                                                                                   m_scene.render.height));
+    if (radius > 0.0f) m_proximity = std::make_shared<LightProximity>(m_scene, radius);
+    if (m_proximity && m_proximity->empty()) m_proximity.reset();
+    m_nearStats = {{"radius", radius}, {"seconds", t.seconds()}};
+  }
+  m_settings.photons.proximity = m_proximity;
   const PhotonMaps maps = tracePhotonsForView(progress);
   m_stats.update(maps.stats.toJson());
   // Caustics on glossy surfaces from the caustic pass's photons where it ran (a scene with
@@ -170,6 +204,10 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
   if (m_settings.hitPhotons) {
     Timer kd;
     m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
+    std::vector<Photon> near = nearPhotons(maps);
+    m_stats["near_light"] = m_nearStats;
+    m_stats["near_light"]["photons"] = near.size();
+    m_nearPhotons = PhotonRadiance(m_scene, m_accel, std::move(near), m_settings.hitEstimate);
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
   const uint64_t photonPeak = peakRssBytes();
@@ -203,7 +241,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
 }
 
 void VoxelConeIntegrator::startTracer() {
-  m_tracer.emplace(m_scene, m_accel, m_field, m_settings, &m_hitPhotons);
+  m_tracer.emplace(m_scene, m_accel, m_field, m_settings, &m_hitPhotons, m_proximity.get());
   const int causticLevel = m_field.settings().causticLevel;
   m_causticVoxel = causticLevel > 0 ? float(m_field.voxelSize(causticLevel)) : m_tracer->finestVoxel();
 }
@@ -239,7 +277,13 @@ Vec3 VoxelConeIntegrator::gatherDiffuse(const SurfaceHit& sh, const Vec3& woWorl
     if (isBlack(f)) continue;
     const Vec2 lightU = shiftedHammersley(i, n, shift);
     indirect += cone.weight * f * m_tracer->trace(sh.position, sh.positionError, ng, d, tanHalf, lightU, 0,
-                                                  m_settings.skyByCones);
+                                                  m_settings.skyByCones, nullptr, nullptr, true);
+  }
+  // What the cones left of the light from surfaces beside the lamps: the photons that came from
+  // there, estimated here (reflected as a Lambertian surface of the base's reflectance).
+  if (!m_nearPhotons.empty()) {
+    const Vec3 f = mat.type == MaterialType::Lambertian ? mat.albedo : diffuseReflectance(mat);
+    indirect += f * kInvPi * m_nearPhotons.irradiance(sh, ng);
   }
   return indirect;
 }

@@ -74,7 +74,9 @@ TEST(ConeTracer, CrossSectionVarianceIsTheCapsByQuadrature) {
 
 TEST(VoxelCone, EmissiveFurnaceGivesTwo) {
   // Albedo 0.5, Le = 1: L = 2 = emission (1) + direct light by shadow rays (0.5) + cones
-  // gathering the walls' reflected radiance 1 (photons, all bounces) times albedo 0.5.
+  // gathering the walls' reflected radiance 1 (photons, all bounces) times albedo 0.5. Every
+  // wall is a lamp, so near_light would leave all of it to the photons at the gathering points
+  // (NearLight.AFurnaceOfLampsGivesTwoFromThePhotonsAlone): 0 keeps the cones' own.
   const Scene scene = test::furnaceScene(0.5f, 1.0f, 0.0f, 4, 2);
   // Both mip filters: their weights are normalized (a parent's sum to one), so a closed
   // uniformly lit enclosure stays uniform at every level and every cone sees radiance 1.
@@ -82,7 +84,11 @@ TEST(VoxelCone, EmissiveFurnaceGivesTwo) {
     for (const char* gather : {"march", "hit"})
       for (int level : {5, 6}) {
         const RenderResult r = renderWith(scene, "voxcone", scene.render,
-                                          {{"photons", 100000}, {"level", level}, {"gather", gather}, {"mip_filter", filter}});
+                                          {{"photons", 100000},
+                                           {"level", level},
+                                           {"gather", gather},
+                                           {"mip_filter", filter},
+                                           {"near_light", 0}});
         const Vec3 m = imageMean(r.image);
         for (int c = 0; c < 3; ++c) EXPECT_NEAR(m[c], 2.0, 0.04) << filter << " " << gather << " level " << level;
         EXPECT_EQ(r.invalidSamples, 0u);

@@ -16,6 +16,7 @@ namespace voxcone {
 class Accel;
 class Scene;
 class PhotonRadiance;
+class LightProximity;
 class VoxelField;
 struct VoxelConeSettings;
 
@@ -50,8 +51,11 @@ public:
   /// estimate of `photons` there (PhotonRadiance) instead of the field's finest level around
   /// it, plus, with settings.hitDirect, the hit's direct light by one shadow ray (the photons
   /// then hold only the light that bounced).
+  /// With `proximity` (and photons), trace(nearSplit = true) takes at each diffuse hit y only the
+  /// share LightProximity::coneShare(y) of its light, the caller the rest from the photons that
+  /// left y (Photon::nearShare).
   ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& settings,
-             const PhotonRadiance* photons = nullptr);
+             const PhotonRadiance* photons = nullptr, const LightProximity* proximity = nullptr);
   /// The radiance one cone gathers from surface point p (rounding error pError, unit normal n
   /// on the side the cone leaves, unit direction d; dot(n, d) <= 0 gathers nothing), half-angle
   /// atan(tanHalf). Where the axis's exact ray meets a mirror or glass (delta materials), the
@@ -65,9 +69,11 @@ public:
   /// (gather = hit only), the emission (and sky) the axis finds through mirrors and glass is
   /// added there, weighted by their lobes: a glossy surface's view of a light in a mirror (L S G,
   /// which neither its light samples nor the caustic photons, stored at diffuse surfaces, carry).
+  /// With `nearSplit` (and a proximity), the light of each diffuse hit beside a lamp counts only
+  /// in its cone share (the constructor's), there and past mirrors, glass and glossy hits.
   Vec3 trace(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d, float tanHalf, const Vec2& lightU,
              int depth = 0, bool sky = false, std::optional<SurfaceHit>* axisHit = nullptr,
-             Vec3* deltaLight = nullptr) const;
+             Vec3* deltaLight = nullptr, bool nearSplit = false) const;
   float finestVoxel() const { return m_v0; }  ///< world units
   /// Per-axis variance of a cone's cross-section at unit distance along its axis, for
   /// directions uniform over its solid angle (half-angle atan(tanHalf)).
@@ -84,14 +90,15 @@ private:
   };
   /// The light a cone of direction d passes on at delta surface sh: its lobes' cones.
   Vec3 continueSpecular(const SurfaceHit& sh, const Vec3& d, float tanHalf, const Vec2& lightU, int depth,
-                        Vec3* deltaLight = nullptr) const;
+                        Vec3* deltaLight, bool nearSplit) const;
   /// The light a cone of direction d passes on at glossy surface sh (neither delta nor diffuse:
   /// no photon estimate there): its direct light by one shadow ray and one cone along a
   /// direction its BSDF samples, as wide as its roughness (counted as a specular hit).
-  Vec3 continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth) const;
+  Vec3 continueGlossy(const SurfaceHit& sh, const Vec3& d, const Vec2& lightU, int depth, bool nearSplit) const;
   /// The radiance a cone of direction d (apex `apex`) takes from the surface its exact ray hit
   /// (not a delta one), looked up in the field at voxel size v where there are no photons.
-  Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU) const;
+  Vec3 hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex, float v, const Vec2& lightU,
+                   bool nearSplit) const;
   std::optional<AxisHit> hitAlongAxis(const Vec3& p, const Vec3& pError, const Vec3& n, const Vec3& d,
                                       float tMax) const;
 
@@ -99,6 +106,7 @@ private:
   const Accel& m_accel;
   const VoxelField& m_field;
   const PhotonRadiance* m_photons = nullptr;
+  const LightProximity* m_proximity = nullptr;
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
   bool m_hitDirect;

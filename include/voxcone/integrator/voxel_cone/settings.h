@@ -68,6 +68,13 @@ struct VoxelConeSettings {
   /// (the default) cones under a constant sky, rays under a map.
   bool skyByCones = false;
   PhotonRadianceSettings hitEstimate;  ///< `hit_photons` (k), `hit_radius` (world units)
+  /// `near_light` (world units; with gather = hit and hit_radiance = photons): the light leaving
+  /// a surface point nearer than this to a lamp goes to the gathers partly by photons
+  /// (LightProximity); 0: cones take all of it, a lamp nearer a cone's hit than a quarter of its
+  /// width counting as that far; kNearLightAuto (the default): kNearLightScale times the mean
+  /// distance a gather's rays travel (SeenRegion::meanGatherDistance), resolved in prepare().
+  float nearLight = 0.0f;
+  static constexpr float kNearLightAuto = -1.0f;
   View view = View::Full;
   /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead
   /// of tracing photons and voxelizing; its settings (levels, footprint, mip filter, photons)

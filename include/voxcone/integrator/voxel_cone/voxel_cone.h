@@ -102,7 +102,13 @@
 ///    photon from the others, and read from the nearest entry that passes the filters,
 ///    Christensen 1999: gathers 4x faster; default 8; 0 or 1: a full estimate at every hit),
 ///    `hit_direct` ("rays", default: the hit's direct light by a shadow ray, the photons only
-///    what bounced; "photons": all of it from the photons);
+///    what bounced; "photons": all of it from the photons); `near_light` (world units, default
+///    a quarter of the mean distance a gather's rays travel, SeenRegion::meanGatherDistance;
+///    0: off): a cone takes the share min(1, (d / near_light)^2)
+///    of the light of a hit at distance d from the nearest lamp (LightProximity), and the photons
+///    that left such surfaces (Photon::nearShare, those where the camera sees) carry the rest to
+///    the gathering point, estimated there (gatherDiffuse); off, a lamp nearer a cone's hit than
+///    a quarter of the cone's width counts as that far;
 ///  - `light_samples` (shadow rays per shading point, default 1);
 ///  - `gathers`: how many of a gathering pixel's samples gather indirect light by cones (default
 ///    1; 0: every one).
@@ -144,9 +150,12 @@
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/voxel/voxel_field.h"
 
+#include <memory>
 #include <optional>
 
 namespace voxcone {
+
+class LightProximity;
 
 class VoxelConeIntegrator final : public Integrator {
 public:
@@ -201,6 +210,9 @@ private:
   /// many in the cells the camera's gathers read (a pilot pass, then the count its share
   /// needs). Starts m_stats with the seen cells and photons.
   PhotonMaps tracePhotonsForView(Progress* progress);
+  /// The photons that left surfaces beside the lamps, where the camera sees, each with its near
+  /// share of its power (m_nearPhotons' photons).
+  std::vector<Photon> nearPhotons(const PhotonMaps& maps) const;
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
   /// The cone tracer over the field just built or read, and the caustic voxel size.
@@ -219,6 +231,12 @@ private:
 
   VoxelField m_field;
   PhotonRadiance m_hitPhotons;  ///< the photons' estimate at cones' exact hits (hit_radiance)
+  /// How near surfaces are to the lamps (near_light), and the photons that left surfaces beside
+  /// them, each with its near share of its power: the light the cones leave to the gathering
+  /// point's own estimate.
+  std::shared_ptr<const LightProximity> m_proximity;
+  PhotonRadiance m_nearPhotons;
+  nlohmann::json m_nearStats;  ///< near_light's radius and the time it took
   PhotonRadiance m_glossyCaustics;  ///< over the caustic photons on glossy surfaces (PhotonMaps::glossyCaustic)
   bool m_glossyCausticByPhotons = false;  ///< L S+ G from those photons (else from the cones, trace's deltaLight)
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
