@@ -34,6 +34,33 @@ bool firstDiffuseHit(const Scene& scene, const Accel& accel, Ray& ray, SurfaceHi
   }
   return false;
 }
+
+/// For each ray of a `raysX` x `raysY` grid of camera rays over a `width` x `height` image (its
+/// rows in parallel): visit(row, hit, nullptr) at its first non-delta hit, then visit(row, hit,
+/// &g) for each of `gathers` stratified cosine-distributed rays from the side the camera sees
+/// that meets a surface g (0 gathers: none).
+template <typename Visit>
+void walkGathers(const Scene& scene, const Accel& accel, int width, int height, int raysX, int raysY, int gathers,
+                 Visit&& visit) {
+  const int strata = gathers > 0 ? std::max(1, int(std::lround(std::sqrt(double(gathers))))) : 0;
+  tbb::parallel_for(0, raysY, [&](int y) {
+    for (int x = 0; x < raysX; ++x) {
+      Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
+                                         (float(y) + 0.5f) / float(raysY) * float(height), width, height);
+      SurfaceHit sh;
+      if (!firstDiffuseHit(scene, accel, ray, sh)) continue;
+      visit(y, sh, nullptr);
+      const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
+      const Frame frame(ng);
+      for (int i = 0; i < strata * strata; ++i) {
+        const Vec2 u((float(i % strata) + 0.5f) / float(strata), (float(i / strata) + 0.5f) / float(strata));
+        const Ray g = spawnRay(sh.position, sh.positionError, ng, frame.toWorld(sampleCosineHemisphere(u)));
+        SurfaceHit gh;
+        if (intersectSurface(scene, accel, g, gh)) visit(y, sh, &gh);
+      }
+    }
+  });
+}
 }  // namespace
 
 uint64_t SeenRegion::keyOf(const Vec3& worldPos) const {
@@ -51,28 +78,10 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
                        int raysY, int gathers)
     : m_cellSize(cellSize), m_origin(scene.bounds().lo) {
   std::vector<std::vector<uint64_t>> rows(size_t(std::max(raysY, 0)));
-  const int strata = gathers > 0 ? std::max(1, int(std::lround(std::sqrt(double(gathers))))) : 0;
-  tbb::parallel_for(0, raysY, [&](int y) {
-    std::vector<uint64_t>& out = rows[size_t(y)];
-    for (int x = 0; x < raysX; ++x) {
-      Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
-                                         (float(y) + 0.5f) / float(raysY) * float(height), width, height);
-      SurfaceHit sh;
-      if (!firstDiffuseHit(scene, accel, ray, sh)) continue;
-      out.push_back(keyOf(sh.position));
-      // Gathers from the side the camera sees: a stratified cosine-distributed set.
-      const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
-      const Frame frame(ng);
-      for (int i = 0; i < strata * strata; ++i) {
-        const Vec2 u((float(i % strata) + 0.5f) / float(strata), (float(i / strata) + 0.5f) / float(strata));
-        const Ray g = spawnRay(sh.position, sh.positionError, ng, frame.toWorld(sampleCosineHemisphere(u)));
-        SurfaceHit gh;
-        if (intersectSurface(scene, accel, g, gh)) out.push_back(keyOf(gh.position));
-      }
-    }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
-  });
+  walkGathers(scene, accel, width, height, raysX, raysY, gathers,
+              [&](int y, const SurfaceHit& hit, const SurfaceHit* gathered) {
+                rows[size_t(y)].push_back(keyOf(gathered ? gathered->position : hit.position));
+              });
   for (const std::vector<uint64_t>& r : rows) m_keys.insert(m_keys.end(), r.begin(), r.end());
   std::sort(m_keys.begin(), m_keys.end());
   m_keys.erase(std::unique(m_keys.begin(), m_keys.end()), m_keys.end());
@@ -80,26 +89,13 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
 
 double SeenRegion::meanGatherDistance(const Scene& scene, const Accel& accel, int width, int height, int raysX,
                                       int raysY, int gathers) {
-  const int strata = std::max(1, int(std::lround(std::sqrt(double(gathers)))));
   std::vector<double> sums(size_t(std::max(raysY, 0)), 0.0), counts(sums.size(), 0.0);
-  tbb::parallel_for(0, raysY, [&](int y) {
-    for (int x = 0; x < raysX; ++x) {
-      Ray ray = scene.camera.generateRay((float(x) + 0.5f) / float(raysX) * float(width),
-                                         (float(y) + 0.5f) / float(raysY) * float(height), width, height);
-      SurfaceHit sh;
-      if (!firstDiffuseHit(scene, accel, ray, sh)) continue;
-      const Vec3 ng = glm::dot(sh.geomNormal, ray.dir) < 0.0f ? sh.geomNormal : -sh.geomNormal;
-      const Frame frame(ng);
-      for (int i = 0; i < strata * strata; ++i) {
-        const Vec2 u((float(i % strata) + 0.5f) / float(strata), (float(i / strata) + 0.5f) / float(strata));
-        const Ray g = spawnRay(sh.position, sh.positionError, ng, frame.toWorld(sampleCosineHemisphere(u)));
-        SurfaceHit gh;
-        if (!intersectSurface(scene, accel, g, gh)) continue;
-        sums[size_t(y)] += double(glm::length(gh.position - sh.position));
-        counts[size_t(y)] += 1.0;
-      }
-    }
-  });
+  walkGathers(scene, accel, width, height, raysX, raysY, gathers,
+              [&](int y, const SurfaceHit& hit, const SurfaceHit* gathered) {
+                if (!gathered) return;
+                sums[size_t(y)] += double(glm::length(gathered->position - hit.position));
+                counts[size_t(y)] += 1.0;
+              });
   double sum = 0.0, count = 0.0;
   for (size_t i = 0; i < sums.size(); ++i) sum += sums[i], count += counts[i];
   return count > 0.0 ? sum / count : 0.0;
