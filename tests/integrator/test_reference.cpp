@@ -27,25 +27,11 @@
 namespace voxcone {
 namespace {
 
+using test::lambertPolygonIrradiance;
 using test::renderWith;
 
 // ---------------------------------------------------------------------------------------------
 // Closed forms
-
-/// Irradiance at p (unit normal n) from a polygon of unit radiance, fully above p's tangent
-/// plane: Lambert's formula E = 1/2 sum_i Theta_i (n . Gamma_i), Theta_i the angle edge i
-/// subtends at p and Gamma_i the unit normal of the plane through p and edge i (Arvo 1994,
-/// "The Irradiance Jacobian for Partially Occluded Polyhedral Sources", eq. 1). In double.
-double lambertPolygonIrradiance(const DVec3& p, const DVec3& n, const std::vector<DVec3>& polygon) {
-  double sum = 0.0;
-  for (size_t i = 0; i < polygon.size(); ++i) {
-    const DVec3 a = polygon[i] - p, b = polygon[(i + 1) % polygon.size()] - p;
-    const DVec3 c = glm::cross(a, b);
-    const double theta = std::atan2(glm::length(c), glm::dot(a, b));
-    sum += theta * glm::dot(n, c / glm::length(c));
-  }
-  return 0.5 * std::fabs(sum);
-}
 
 TEST(LambertFormula, MatchesHandComputedCases) {
   // A small square of area A facing p at distance d gives A / d^2; a huge one (a half-space)

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 namespace voxcone::test {
 
@@ -46,6 +47,21 @@ inline PhotonSettings photonSettings(uint64_t photons, uint64_t caustic, int max
   s.maxDepth = maxDepth;
   s.seed = seed;
   return s;
+}
+
+/// Irradiance at p (unit normal n) from a polygon of unit radiance, fully above p's tangent
+/// plane: Lambert's formula E = 1/2 sum_i Theta_i (n . Gamma_i), Theta_i the angle edge i
+/// subtends at p and Gamma_i the unit normal of the plane through p and edge i (Arvo 1994,
+/// "The Irradiance Jacobian for Partially Occluded Polyhedral Sources", eq. 1). In double.
+inline double lambertPolygonIrradiance(const DVec3& p, const DVec3& n, const std::vector<DVec3>& polygon) {
+  double sum = 0.0;
+  for (size_t i = 0; i < polygon.size(); ++i) {
+    const DVec3 a = polygon[i] - p, b = polygon[(i + 1) % polygon.size()] - p;
+    const DVec3 c = glm::cross(a, b);
+    const double theta = std::atan2(glm::length(c), glm::dot(a, b));
+    sum += theta * glm::dot(n, c / glm::length(c));
+  }
+  return 0.5 * std::fabs(sum);
 }
 
 /// The six faces of the box [lo, hi] as JSON quads of `material`, their normals outward (or

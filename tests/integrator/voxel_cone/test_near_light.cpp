@@ -98,7 +98,8 @@ TEST(NearLight, AFurnaceOfLampsGivesTwoFromThePhotonsAlone) {
 TEST(NearLight, TheImageDoesNotDependOnTheSplitsRadius) {
   // 0.15 m, 0.6 m and 100 m (every surface within it: the cones take nothing and the photons
   // at the gathering points all that bounced) divide the same light differently. Measured: the
-  // means 1.001 and 1.013 of 0.6 m's, the worst cells 0.013 and 0.049 off.
+  // means 1.013 and 1.014 of 0.6 m's, the worst cells 0.069 and 0.055 off; a cell of one render
+  // moves by up to 0.052 from seed to seed (the next test), so two renders' cells by twice that.
   const Image a = lampRoom(0.15, 1), b = lampRoom(0.6, 1), c = lampRoom(100.0, 1);
   const double ma = luminance(DVec3(test::imageMean(a))), mb = luminance(DVec3(test::imageMean(b))),
                mc = luminance(DVec3(test::imageMean(c)));
@@ -106,17 +107,17 @@ TEST(NearLight, TheImageDoesNotDependOnTheSplitsRadius) {
               worstDeviation(cellRatios(a, b)), worstDeviation(cellRatios(c, b)));
   EXPECT_NEAR(ma / mb, 1.0, 0.02);
   EXPECT_NEAR(mc / mb, 1.0, 0.02);
-  EXPECT_LT(worstDeviation(cellRatios(a, b)), 0.08);
-  EXPECT_LT(worstDeviation(cellRatios(c, b)), 0.08);
+  EXPECT_LT(worstDeviation(cellRatios(a, b)), 0.10);
+  EXPECT_LT(worstDeviation(cellRatios(c, b)), 0.10);
 }
 
 // Measured (48x48, 16 spp, path at 1024 spp; path's own image mean moves by 0.2% from seed to
-// seed at 1024 spp, against 8192): the default's image mean 1.024 of path, worst cell 0.080,
-// cells of two seeds at most 0.051 apart; with near_light 0, worst cell 0.068 but 0.107 apart from
-// seed to seed (one cone in thousands meets the ceiling above the lamp). The 2.4% is the photon
-// estimate's blur where the gathering points take the light from beside the lamp: the light
-// that leaves the 2 cm gap lands in strips the estimate's disc (up to hit_radius, 0.17 m here)
-// spreads.
+// seed at 1024 spp, against 8192): the default's image mean 1.029 of path, worst cell 0.078,
+// cells of two seeds at most 0.052 apart; with near_light 0, worst cell 0.109 and 0.103 apart
+// from seed to seed (one cone in thousands meets the ceiling above the lamp). The 2.9% is, as
+// far as we can tell, the photon estimate's blur where the gathering points take the light from
+// beside the lamp: the light that leaves the 2 cm gap lands in strips that the estimate's disc
+// (up to hit_radius, 0.17 m here) spreads.
 TEST(NearLight, ALampUnderTheCeilingMatchesPathAndNoCellMovesWithTheSeed) {
   const Scene scene = lampUnderCeilingScene(0.02f, 48, 16);
   RenderSettings p = scene.render;
@@ -130,7 +131,7 @@ TEST(NearLight, ALampUnderTheCeilingMatchesPathAndNoCellMovesWithTheSeed) {
   const double mean = luminance(DVec3(test::imageMean(s1))) / luminance(DVec3(test::imageMean(path)));
   std::printf("default: mean %.4f, worst cell vs path %.3f, seed to seed %.3f; near_light 0: vs path %.3f, seed to seed %.3f\n",
               mean, vsPath, seeds, offVsPath, seedsOff);
-  EXPECT_NEAR(mean, 1.0, 0.035);
+  EXPECT_NEAR(mean, 1.0, 0.04);
   EXPECT_LT(vsPath, 0.10);
   EXPECT_LT(seeds, 0.08);
 }

@@ -95,6 +95,53 @@ TEST(VoxelCone, EmissiveFurnaceGivesTwo) {
       }
 }
 
+/// A closed 4 x 4 x 1 m room, black but for its white floor, whose ceiling has a slot open to a
+/// constant sky of radiance 1 across x in [-2, 2], z in [z0, z1]; the camera sees a small patch
+/// of floor around the origin.
+Scene slotRoom(float z0, float z1) {
+  const std::string slot = R"({"type": "quad", "material": "black", "vertices": [[-2, 1, -2], [2, 1, -2], [2, 1, Z], [-2, 1, Z]]},
+      {"type": "quad", "material": "black", "vertices": [[-2, 1, W], [2, 1, W], [2, 1, 2], [-2, 1, 2]]})";
+  std::string ceiling = slot;
+  ceiling.replace(ceiling.find('Z'), 1, std::to_string(z0));
+  ceiling.replace(ceiling.find('Z'), 1, std::to_string(z0));
+  ceiling.replace(ceiling.find('W'), 1, std::to_string(z1));
+  ceiling.replace(ceiling.find('W'), 1, std::to_string(z1));
+  const std::string json = R"({
+    "camera": {"position": [0, 0.5, 0], "target": [0, 0, 0], "up": [0, 0, 1], "fov_y_deg": 0.5},
+    "render": {"width": 4, "height": 4, "spp": 1024, "max_depth": 4},
+    "materials": {"white": {"type": "lambertian", "albedo": 1}, "black": {"type": "lambertian", "albedo": 0}},
+    "shapes": [
+      {"type": "quad", "material": "white", "vertices": [[-2, 0, -2], [-2, 0, 2], [2, 0, 2], [2, 0, -2]]},
+      {"type": "quad", "material": "black", "vertices": [[-2, 0, -2], [-2, 1, -2], [-2, 1, 2], [-2, 0, 2]]},
+      {"type": "quad", "material": "black", "vertices": [[2, 0, -2], [2, 0, 2], [2, 1, 2], [2, 1, -2]]},
+      {"type": "quad", "material": "black", "vertices": [[-2, 0, -2], [2, 0, -2], [2, 1, -2], [-2, 1, -2]]},
+      {"type": "quad", "material": "black", "vertices": [[-2, 0, 2], [-2, 1, 2], [2, 1, 2], [2, 0, 2]]},
+      )" + ceiling + R"(
+    ],
+    "lights": [{"type": "environment", "radiance": [1, 1, 1]}]
+  })";
+  return parseScene(json, "slot", ".");
+}
+
+TEST(VoxelCone, SkyThroughASlotMatchesLambertsFormula) {
+  // The floor's radiance is the sky's irradiance through the slot over pi (the sky comes by the
+  // gather's cones, every sample gathering, no filter): a 5 cm slot 1 m up, its near edge at
+  // 45 degrees, 2 degrees of elevation wide straight ahead. Measured with 32 cones (1024 spp,
+  // about 4000 axes through the slot, 1.6% of noise): the stratified cosine set 1.016 and 0.992 of
+  // Lambert's formula; the cone set turned about the normal alone, at its fixed elevations, 0.996
+  // and 0.928.
+  for (const auto& [z0, z1] : {std::pair{1.0f, 1.05f}, std::pair{0.95f, 1.0f}}) {
+    const Scene scene = slotRoom(z0, z1);
+    const std::vector<DVec3> polygon = {{-2, 1, z0}, {2, 1, z0}, {2, 1, z1}, {-2, 1, z1}};
+    const double exact = test::lambertPolygonIrradiance(DVec3(0.0), DVec3(0, 1, 0), polygon) / kPi;
+    const RenderResult r = renderWith(scene, "voxcone", scene.render,
+                                      {{"gathers", 0}, {"filter", 0}, {"gather_spacing", 1}, {"photons", 1000}});
+    const double got = double(imageMean(r.image).x);
+    std::printf("slot %.2f-%.2f: %.5f, exact %.5f, ratio %.3f\n", z0, z1, got, exact, got / exact);
+    EXPECT_NEAR(got / exact, 1.0, 0.05) << "slot at z " << z0 << "-" << z1;
+  }
+}
+
 TEST(VoxelCone, PointLightFurnaceGivesOne) {
   // Kd = 0.5, I = pi at the centre of a unit sphere: direct 0.5 + indirect 0.5.
   const Scene scene = test::furnaceScene(0.5f, 0.0f, kPi, 4, 2);
@@ -291,7 +338,7 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
       return vc / ref;
     };
     // The default (32 cones, each an exact ray and the photon estimate at its hit): measured
-    // +5.4% / +6.4% at the two points.
+    // +5.2% / +8.6% at the two points (+5.4% / +6.4% with the cone set turned about the normal).
     EXPECT_NEAR(ratio({}), 1.0f, 0.1f);
     // The earlier default, 6 cones marched through the field's voxels: measured +6.8% / +5.7%
     // (+15.8% / +15.4% before the field had a margin: the plane lay on its boundary). Besides
@@ -300,12 +347,13 @@ TEST(VoxelCone, LitPlaneWithOccluderMatchesPathInTheShadow) {
     // before the march followed the cone's own axis, and +1000% when the occluder's voxels mixed
     // its lit top into its underside.
     EXPECT_NEAR(ratio({{"gather", "march"}, {"cones", 6}, {"hit_radiance", "field"}}), 1.0f, 0.1f);
-    // gather = hit reading the field at its hits: close with narrow cones; with 6 cones it fails:
-    // a cone whose axis misses the occluder counts none of it (and one that hits counts all),
-    // and its lookup at the cone's width mixes the underside with the floor: measured -9% /
-    // -23% (-45% / -54% without the field's margin); narrow cones +5.9% / +7.4%.
+    // gather = hit reading the field at its hits: its lookup at the cone's width mixes the
+    // underside with the floor, and a cone whose axis misses the occluder counts none of it (one
+    // that hits counts all). Measured with 64 cones +7.0% / +8.5%, with 6 -2.7% / -6.1%; with the
+    // cone set turned about the normal, whose 6 elevations are fixed, 6 cones had been -9% / -23%
+    // (-45% / -54% without the field's margin) and 64 +5.9% / +7.4%.
     EXPECT_NEAR(ratio({{"cones", 64}, {"hit_radiance", "field"}}), 1.0f, 0.1f);
-    EXPECT_LT(ratio({{"cones", 6}, {"hit_radiance", "field"}}), 0.95f);
+    EXPECT_NEAR(ratio({{"cones", 6}, {"hit_radiance", "field"}}), 1.0f, 0.1f);
   }
 }
 
@@ -479,7 +527,10 @@ TEST(VoxelCone, ARoughMetalBlockPassesItsLightOnInEveryRegion) {
   // on one sample per pixel: the rough gold dragon was 8% dark, relMSE 0.012 where path needs
   // 10 spp for it. At 64x64 the cells were 0.72-1.10 of path at 256 spp, their mean 0.930; now
   // 0.93-1.11 (the 1.11 cell, the floor before the short block, the same before), mean 1.002.
-  // Bounds: the canonical scenes' 13% per cell, 3% on the cells' mean.
+  // Bounds: the canonical scenes' 13% per cell, 3% on the cells' mean, on the mean image of two
+  // seeds: that cell alone moves by up to 17% from seed to seed (against path at 4096 spp, four
+  // seeds: 0.98-1.16 with the gather's stratified cosine set, 1.03-1.10 with the cone set turned
+  // about the normal, whose seed 1 put another cell at 1.23).
   std::ifstream f(test::sourceDir() + "/data/scenes/cornell-box.json");
   nlohmann::json j = nlohmann::json::parse(f);
   j["materials"]["gold_rough"] = {{"type", "rough_conductor"}, {"eta", {0.143, 0.374, 1.442}},
@@ -489,7 +540,17 @@ TEST(VoxelCone, ARoughMetalBlockPassesItsLightOnInEveryRegion) {
   j["render"]["width"] = j["render"]["height"] = 64;
   j["render"]["spp"] = 16;
   const Scene scene = parseScene(j.dump(), "cornell-rough-gold", test::sourceDir() + "/data/scenes");
-  const std::vector<double> r = test::cellRatiosAgainstPath(scene, 256);
+  RenderSettings p = scene.render;
+  p.spp = 256;
+  p.seed = 1234;
+  const Image path = renderWith(scene, "path", p).image;
+  Image vc = renderWith(scene, "voxcone", scene.render).image;
+  RenderSettings second = scene.render;
+  second.seed = scene.render.seed + 1;
+  const Image other = renderWith(scene, "voxcone", second).image;
+  for (size_t i = 0; i < vc.pixels.size(); ++i) vc.pixels[i] = 0.5f * (vc.pixels[i] + other.pixels[i]);
+  std::vector<double> r;
+  for (const RegionError& c : regionErrors(vc, path, 4)) r.push_back(test::luminance(c.meanTest) / test::luminance(c.meanReference));
   double mean = 0.0;
   for (size_t i = 0; i < r.size(); ++i) {
     EXPECT_NEAR(r[i], 1.0, 0.13) << "cell " << i % 4 << ", " << i / 4;

@@ -21,7 +21,10 @@
 ///  - diffuse surfaces: caustics from the caustic grid at the point, plus indirect light from
 ///    the cone set (cone_set.h) over the hemisphere on the viewer's side, each cone weighted by
 ///    f(wo, axis) * pi * w_i (albedo * w_i for Lambertian). By default ("hit") each cone is one
-///    exact HBVH ray along its axis and the radiance at its hit is the photons' estimate there
+///    exact HBVH ray along its axis, the axes a stratified cosine-distributed set (a Hammersley
+///    set shifted per gather through the cosine map, w_i = 1/N; the cone set turned about the
+///    normal integrates at fixed elevations, gatherDiffuse), and the radiance at its hit is the
+///    photons' estimate there
 ///    (PhotonRadiance: the k nearest photons on that surface, on the side the ray hit, in sight
 ///    of the hit): no voxel is shared with another surface, so no light crosses a wall. The
 ///    hit's direct light is one shadow ray (a light sample per cone, stratified over the
