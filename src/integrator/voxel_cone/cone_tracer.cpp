@@ -69,9 +69,10 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
   if (m_photons) {
     // Beside a lamp the cone takes its share of the hit's light, the photons that left it the rest
     // (LightProximity); its lamps then need no clamp: within the radius the share falls as d^2.
-    const float share = nearSplit && m_proximity ? m_proximity->coneShare(hit.surface.position) : 1.0f;
+    const bool split = nearSplit && m_proximity;
+    const float share = split ? m_proximity->coneShare(hit.surface.position) : 1.0f;
     if (!(share > 0.0f)) return Vec3(0.0f);
-    const float clamp = nearSplit && m_proximity ? 0.0f : kHitLightClamp * v;
+    const float clamp = split ? 0.0f : kHitLightClamp * v;
     Vec3 L = m_photons->radiance(hit.surface, hit.side);
     if (m_hitDirect && m_scene.materials[hit.surface.material].hasDiffuseBase()) {
       // The lamps and suns by one sample, the sky by another: chosen together by power, a sky

@@ -134,6 +134,8 @@ TEST(NearLight, ALampUnderTheCeilingMatchesPathAndNoCellMovesWithTheSeed) {
   EXPECT_NEAR(mean, 1.0, 0.04);
   EXPECT_LT(vsPath, 0.10);
   EXPECT_LT(seeds, 0.08);
+  // Without the split the seeds disagree by twice as much (the failure this guards).
+  EXPECT_GT(seedsOff, 1.5 * seeds);
 }
 
 }  // namespace

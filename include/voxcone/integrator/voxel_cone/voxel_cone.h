@@ -239,7 +239,6 @@ private:
   /// point's own estimate.
   std::shared_ptr<const LightProximity> m_proximity;
   PhotonRadiance m_nearPhotons;
-  nlohmann::json m_nearStats;  ///< near_light's radius and the time it took
   PhotonRadiance m_glossyCaustics;  ///< over the caustic photons on glossy surfaces (PhotonMaps::glossyCaustic)
   bool m_glossyCausticByPhotons = false;  ///< L S+ G from those photons (else from the cones, trace's deltaLight)
   std::optional<ConeTracer> m_tracer;  ///< once prepare() built the field
