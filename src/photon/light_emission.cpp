@@ -83,6 +83,43 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scen
   m_cdf.back() = 1.0;
 }
 
+void LightEmission::setDistantTarget(const Sphere& target, double share) {
+  m_distantTarget = Sphere();
+  m_distantShare = 0.0;
+  if (!(target.radius > 0.0f) || !(share > 0.0 && share < 1.0) || !isFinite(target.center)) return;
+  // A target as large as the scene gains nothing.
+  if (!(target.radius < m_sphere.radius)) return;
+  m_distantTarget = target;
+  m_distantShare = share;
+}
+
+Vec3 LightEmission::discPoint(const Vec3& d, const Vec3& centre, float radius, bool targeted, float uChoice,
+                              const Vec2& u, double& areaPdf) const {
+  const Vec3 discC = discCentre(d);
+  const Frame frame(d);
+  // The projection of a point onto the disc's plane (through discC, across d).
+  const auto onPlane = [&](const Vec3& p) { return p - d * glm::dot(p - discC, d); };
+  const Vec3 whole = onPlane(centre);
+  const double wholeArea = double(kPi) * double(radius) * double(radius);
+  if (!targeted || !(m_distantTarget.radius > 0.0f)) {
+    areaPdf = 1.0 / wholeArea;
+    return whole + frame.toWorld(Vec3(sampleConcentricDisk(u) * radius, 0.0f));
+  }
+  const Vec3 target = onPlane(m_distantTarget.center);
+  const float r = m_distantTarget.radius;
+  const double targetArea = double(kPi) * double(r) * double(r);
+  const bool toTarget = double(uChoice) < m_distantShare;
+  const Vec3 p = toTarget ? target + frame.toWorld(Vec3(sampleConcentricDisk(u) * r, 0.0f))
+                          : whole + frame.toWorld(Vec3(sampleConcentricDisk(u) * radius, 0.0f));
+  // The mixture's density at p: each part's where p lies in it (the target part may reach past
+  // the whole disc; its rays there miss the scene).
+  const auto inside = [](const Vec3& q, const Vec3& c, float rad) { return glm::dot(q - c, q - c) <= rad * rad * 1.0001f; };
+  areaPdf = (inside(p, whole, radius) ? (1.0 - m_distantShare) / wholeArea : 0.0) +
+            (inside(p, target, r) ? m_distantShare / targetArea : 0.0);
+  if (!(areaPdf > 0.0)) areaPdf = (toTarget ? m_distantShare / targetArea : (1.0 - m_distantShare) / wholeArea);
+  return p;
+}
+
 Vec3 LightEmission::discCentre(const Vec3& direction) const {
   // 1% outside the sphere: a point of the disc lies at least that far from the scene.
   return m_sphere.center - direction * (1.01f * m_sphere.radius + 1e-6f);
@@ -123,16 +160,19 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   // per channel even when the lights differ in colour).
   out.fluxWatts = light.fluxWatts / m_pmf[idx];
 
-  if (light.environment) return sampleEnvironment(idx, uPos, uDir, m_sphere.center, m_sphere.radius, out);
+  if (light.environment) return sampleEnvironment(idx, true, uSide, uPos, uDir, m_sphere.center, m_sphere.radius, out);
 
   if (light.directional >= 0) {
     // A uniform point on the disc of radius R across the light, outside the scene: every ray
     // of the light that meets the scene starts on it, each carrying E pi R^2 / photons.
-    const Vec3 d = sunDirection(m_scene.directionalLights[static_cast<size_t>(light.directional)], uPos);
-    const Vec2 q = sampleConcentricDisk(uDir) * m_sphere.radius;
+    const DirectionalLight& dl = m_scene.directionalLights[static_cast<size_t>(light.directional)];
+    const Vec3 d = sunDirection(dl, uPos);
+    double areaPdf = 0.0;
     out.ray = Ray();
-    out.ray.origin = discCentre(d) + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
+    out.ray.origin = discPoint(d, m_sphere.center, m_sphere.radius, true, uSide, uDir, areaPdf);
     out.ray.dir = d;
+    // E over the point's density (E pi R^2 on the whole disc alone), over the choice's pmf.
+    out.fluxWatts = glm::max(DVec3(dl.irradiance), DVec3(0.0)) / areaPdf / m_pmf[idx];
     return isFinite(out.ray.origin);
   }
 
@@ -156,8 +196,8 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
   return true;
 }
 
-bool LightEmission::sampleEnvironment(size_t idx, const Vec2& uPos, const Vec2& uDir, const Vec3& centre, float radius,
-                                      EmittedPhoton& out) const {
+bool LightEmission::sampleEnvironment(size_t idx, bool targeted, float uChoice, const Vec2& uPos, const Vec2& uDir,
+                                      const Vec3& centre, float radius, EmittedPhoton& out) const {
   // A direction w from the environment's sampler (uDir: the emission guide's cell), then a
   // uniform point on the disc of radius r facing w, outside the scene's bounding sphere,
   // centred on the line through `centre` along w: every ray from that direction whose first
@@ -167,14 +207,12 @@ bool LightEmission::sampleEnvironment(size_t idx, const Vec2& uPos, const Vec2& 
   const Vec3 w = m_scene.environment->sample(uDir, pdfDir);
   if (!(pdfDir > 0.0f)) return false;
   const Vec3 d = -w;  // the photon travels from the sky into the scene
-  const Vec3 discC = discCentre(d);
-  const Vec3 onDisc = centre - d * glm::dot(centre - discC, d);
-  const Vec2 q = sampleConcentricDisk(uPos) * radius;
+  double areaPdf = 0.0;
   out.ray = Ray();
-  out.ray.origin = onDisc + Frame(d).toWorld(Vec3(q.x, q.y, 0.0f));
+  out.ray.origin = discPoint(d, centre, radius, targeted, uChoice, uPos, areaPdf);
   out.ray.dir = d;
-  const double r = double(radius);
-  out.fluxWatts = double(kPi) * r * r * DVec3(m_scene.environment->radiance(w)) / double(pdfDir) / m_pmf[idx];
+  out.fluxWatts = DVec3(m_scene.environment->radiance(w)) / areaPdf / double(pdfDir) / m_pmf[idx];
+  out.environment = true;
   return isFinite(out.ray.origin) && isFinite(out.ray.dir);
 }
 
@@ -185,7 +223,7 @@ bool LightEmission::sampleToward(double uLight, float uSide, const Vec2& uPos, c
   const Light& light = m_lights[idx];
   if (light.environment) {
     if (!(target.radius >= 0.0f)) return sample(uLight, uSide, uPos, uDir, out);
-    return sampleEnvironment(idx, uPos, uDir, target.center, std::min(target.radius, m_sphere.radius), out);
+    return sampleEnvironment(idx, false, 0.0f, uPos, uDir, target.center, std::min(target.radius, m_sphere.radius), out);
   }
   if (light.directional >= 0) {
     // The paths whose first hit lies in the target start in the disc of its radius around the

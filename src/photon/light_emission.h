@@ -23,6 +23,7 @@ struct EmittedPhoton {
   /// Flux estimate of this one sample, W per channel: the chosen light's RGB flux divided by
   /// the probability of choosing it. Its expectation over the choice is the total flux.
   DVec3 fluxWatts{0.0};
+  bool environment = false;  ///< it left the environment (the sky)
 };
 
 /// The lights of a scene with their flux and the power distribution used to choose them.
@@ -33,6 +34,13 @@ public:
   /// (emitting from a disc that covers the scene's bounding sphere, pbrt's distant light) and
   /// the environment (from such a disc facing each direction it draws).
   explicit LightEmission(const Scene& scene);
+
+  /// Distant lights (directional, environment) then emit a share `share` in (0, 1) of their
+  /// photons from the disc of `target`'s radius around its centre's projection (what the camera
+  /// looks at) and the rest from the whole disc, each photon weighted by the mixture's density
+  /// at its point: unbiased, as the whole disc keeps 1 - share. A target of negative radius (or
+  /// one that covers the scene's sphere) leaves emission as it was.
+  void setDistantTarget(const Sphere& target, double share);
 
   /// True when no light emits anything (no photon can be emitted).
   bool empty() const { return m_cdf.empty(); }
@@ -76,18 +84,26 @@ private:
   Vec3 pointOn(const Light& light, const Vec2& uPos, Vec3& pError, Vec3& frontNormal) const;
 
   /// An environment photon (light `idx`): its direction from the environment's sampler with
-  /// uDir, its origin uniform (uPos) on the disc of `radius` facing it, beyond the bounding
-  /// sphere, centred on the line through `centre` along it.
-  bool sampleEnvironment(size_t idx, const Vec2& uPos, const Vec2& uDir, const Vec3& centre, float radius,
-                         EmittedPhoton& out) const;
+  /// uDir, its origin (uPos) on the disc of `radius` facing it, beyond the bounding sphere,
+  /// centred on the line through `centre` along it (discPoint: with `targeted`, the distant
+  /// target's mixture, uChoice picking its part).
+  bool sampleEnvironment(size_t idx, bool targeted, float uChoice, const Vec2& uPos, const Vec2& uDir,
+                         const Vec3& centre, float radius, EmittedPhoton& out) const;
 
   /// The disc a directional light emits from: centred on the bounding sphere's axis along the
   /// light, a little outside the sphere, radius R.
   Vec3 discCentre(const Vec3& direction) const;
+  /// A point of the emitting disc across direction d: uniform (u) on the disc of `radius` around
+  /// `centre`'s projection, or, with `targeted` and a distant target set, from the mixture of
+  /// that disc and the target's (uChoice picks the part); and the area density there.
+  Vec3 discPoint(const Vec3& d, const Vec3& centre, float radius, bool targeted, float uChoice, const Vec2& u,
+                 double& areaPdf) const;
 
   const Scene& m_scene;
   Sphere m_sphere;  ///< the scene's bounding sphere
   std::vector<Light> m_lights;
+  Sphere m_distantTarget;        ///< setDistantTarget's (radius < 0: none)
+  double m_distantShare = 0.0;
   std::vector<double> m_cdf;   ///< cumulative choice probability, the last entry exactly 1
   std::vector<double> m_pmf;
   DVec3 m_totalFlux{0.0};

@@ -4,6 +4,7 @@
 
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/ray.h"
+#include "voxcone/photon/seen_region.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 
@@ -53,12 +54,22 @@ float pointHash(const Vec3& p) {
 }
 }  // namespace
 
+bool PhotonRadianceSettings::keeps(const Photon& p) const {
+  // In a cell the gathers read, a photon on a side they do not see (a roof above a ceiling, a
+  // wall's outer face) is of no use; in a cell they do not read, it may be (the region is a
+  // sample of what the gathers reach), except the sky's straight ones (on the ground outside).
+  const bool inRegion = !region || region->contains(p.position, p.normal);
+  if (!inRegion && region->holdsCell(p.position)) return false;
+  if (!indirectOnly || p.bounces > 0) return true;
+  return skyDirect && p.fromEnvironment && inRegion;
+}
+
 PhotonRadiance::PhotonRadiance(const Scene& scene, const Accel& accel, const PhotonMaps& maps,
                                const PhotonRadianceSettings& s)
     : m_scene(&scene), m_accel(&accel), m_settings(s) {
   m_photons.reserve(maps.global.size() + maps.caustic.size());
   for (const Photon& ph : maps.global)
-    if (!s.indirectOnly || ph.bounces > 0) m_photons.push_back(ph);
+    if (s.keeps(ph)) m_photons.push_back(ph);
   m_photons.insert(m_photons.end(), maps.caustic.begin(), maps.caustic.end());
   build();
 }

@@ -107,6 +107,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
         ph.normal = glm::dot(sh.shadingNormal, woWorld) < 0.0f ? -sh.shadingNormal : sh.shadingNormal;
         ph.bounces = static_cast<uint8_t>(std::min(segment - 1, 255));
         ph.nearShare = nearShare;
+        ph.fromEnvironment = e.environment ? 1 : 0;
         out.push_back(ph);
         if (bins) bins->push_back(bin);
       }
@@ -165,7 +166,8 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   Progress nullProgress;
   Progress& prog = progress ? *progress : nullProgress;
   PhotonMaps maps;
-  const LightEmission lights(scene);
+  LightEmission lights(scene);
+  lights.setDistantTarget(settings.distantTarget, settings.distantShare);
   // Where caustic photons are aimed: the bounding sphere of the delta triangles (none: not aimed).
   Sphere aim;
   if (settings.aimCaustics) {

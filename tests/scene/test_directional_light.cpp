@@ -118,6 +118,45 @@ TEST(DirectionalLight, PhotonsCarryECosTimesTheFloorsArea) {
     EXPECT_NEAR(glm::dot(maps.global[i].incident, Vec3(-0.8660254f, 0.5f, 0.0f)), 1.0f, 1e-5f);
 }
 
+TEST(DirectionalLight, PhotonsAimedAtWhatTheCameraReadsCarryTheSameFlux) {
+  // distant_aim: three quarters of the photons leave the disc of a 0.5 m sphere around a point
+  // of the floor, the rest the whole disc, each weighted by the mixture's density at its point.
+  // The floor still receives E cos(theta) 16 = 16 W in red (5 sigma of the photons' own
+  // spread), while the tube of the target now holds most photons instead of 3% of them.
+  const Scene scene = sunScene();
+  const Hbvh accel(scene);
+  const Vec3 d = glm::normalize(Vec3(0.8660254f, -0.5f, 0.0f));
+  const Sphere target{Vec3(1.0f, 0.0f, 1.0f), 0.5f};
+  const auto inTube = [&](const Vec3& p) {
+    const Vec3 off = p - target.center;
+    return glm::length(off - d * glm::dot(off, d)) < target.radius;
+  };
+  PhotonSettings s = test::photonSettings(200000, 0);
+  const PhotonMaps blind = tracePhotons(scene, accel, s);
+  s.distantTarget = target;
+  s.distantShare = 0.75;
+  const PhotonMaps aimed = tracePhotons(scene, accel, s);
+  double red = 0.0, redSq = 0.0;
+  size_t aimedIn = 0, blindIn = 0;
+  for (const Photon& p : aimed.global) {
+    red += p.power.x;
+    redSq += double(p.power.x) * double(p.power.x);
+    aimedIn += inTube(p.position) ? 1 : 0;
+  }
+  for (const Photon& p : blind.global) blindIn += inTube(p.position) ? 1 : 0;
+  const double n = double(s.photons), sigma = std::sqrt(std::max(redSq - red * red / n, 0.0));
+  EXPECT_NEAR(red, 16.0, 5.0 * sigma);
+  EXPECT_LT(sigma, 0.2);
+  const double r = scene.boundingSphere().radius, tubeShare = 0.25 / (r * r);
+  EXPECT_GT(double(aimedIn), 0.9 * (0.75 + 0.25 * tubeShare) * n);
+  EXPECT_LT(double(blindIn), 1.2 * tubeShare * n);
+  // A target as large as the scene's sphere changes nothing.
+  s.distantTarget = Sphere{scene.boundingSphere().center, float(r)};
+  const PhotonMaps whole = tracePhotons(scene, accel, s);
+  ASSERT_EQ(whole.global.size(), blind.global.size());
+  for (size_t i = 0; i < whole.global.size(); i += 97) EXPECT_EQ(whole.global[i].position, blind.global[i].position);
+}
+
 TEST(DirectionalLight, BadLightsAreOneLineErrors) {
   const auto errorOf = [](const std::string& light) {
     const std::string json = R"({

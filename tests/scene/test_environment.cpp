@@ -352,6 +352,37 @@ TEST_F(EnvironmentFiles, PhotonsCarryPiLTimesTheFloorsArea) {
   }
 }
 
+TEST(Environment, PhotonsAimedAtWhatTheCameraReadsCarryTheSameFlux) {
+  // distant_aim under a constant sky: three quarters of the photons of each direction leave the
+  // disc of a 1 m sphere around the floor's centre. The floor's upper side still receives
+  // pi L A = 16 pi W in red (5 sigma of the photons' own spread), every photon says it came
+  // from the sky, and the disc of 0.5 m at the floor's centre holds about 6x more of them
+  // (0.75 r^2 / 2 of the target's + 0.25 of the whole disc's 1.6%, against 1.6%).
+  const Scene scene = floorScene(R"({"type": "environment", "radiance": [1, 0.5, 0.25]})");
+  const Hbvh accel(scene);
+  PhotonSettings s = test::photonSettings(200000, 0);
+  const PhotonMaps blind = tracePhotons(scene, accel, s);
+  s.distantTarget = Sphere{Vec3(0.0f), 1.0f};
+  s.distantShare = 0.75;
+  const PhotonMaps aimed = tracePhotons(scene, accel, s);
+  double up = 0.0, upSq = 0.0;
+  for (const Photon& p : aimed.global) {
+    ASSERT_EQ(p.fromEnvironment, 1);
+    if (p.normal.y <= 0.0f) continue;
+    up += p.power.x;
+    upSq += double(p.power.x) * double(p.power.x);
+  }
+  const double n = double(s.photons), sigma = std::sqrt(std::max(upSq - up * up / n, 0.0));
+  EXPECT_NEAR(up, kPi * 16.0, 5.0 * sigma);
+  EXPECT_LT(sigma, 0.02 * kPi * 16.0);
+  const auto central = [](const PhotonMaps& maps) {
+    size_t n = 0;
+    for (const Photon& p : maps.global) n += glm::length(p.position) < 0.5f ? 1 : 0;
+    return n;
+  };
+  EXPECT_GT(central(aimed), 4 * central(blind));
+}
+
 TEST_F(EnvironmentFiles, BadEnvironmentsAreOneLineErrors) {
   const std::string sky = writeSky();
   const auto errorOf = [](const std::string& lights) {

@@ -42,6 +42,7 @@
 namespace voxcone {
 
 class Accel;
+class SeenRegion;
 class Scene;
 struct SurfaceHit;
 struct Material;
@@ -59,6 +60,14 @@ struct PhotonRadianceSettings {
   /// Leave out the global photons straight from a light (bounces 0): the estimate is then the
   /// light that bounced at least once, for callers that take direct light by shadow rays.
   bool indirectOnly = false;
+  /// With indirectOnly: keep the photons straight from the environment too, for callers that
+  /// take the lamps' and suns' direct light by shadow rays and the sky's from the photons.
+  bool skyDirect = false;
+  /// Where given (the cells the gathers read, SeenRegion), the photons in its cells on sides
+  /// it does not hold are left out, and the sky's straight photons outside it.
+  std::shared_ptr<const SeenRegion> region = nullptr;
+  /// Whether the estimate uses photon p.
+  bool keeps(const Photon& p) const;
 };
 
 /// Photon density estimates at surface points with the filters above. Immutable after

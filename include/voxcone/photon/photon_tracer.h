@@ -5,6 +5,7 @@
 /// reflection/refraction through the HBVH, are stored at diffuse hits and survive diffuse
 /// bounces by Russian roulette on the albedo.
 
+#include "voxcone/core/bounds.h"
 #include "voxcone/core/math.h"
 #include "voxcone/core/progress.h"
 
@@ -33,6 +34,8 @@ struct Photon {
   /// Scattering events between the light and this hit, saturating at 255: 0 for a photon
   /// straight from a light (direct light, which photon mapping takes from shadow rays).
   uint8_t bounces = 0;
+  /// 1 for a photon that left the environment (the sky), else 0.
+  uint8_t fromEnvironment = 0;
   /// With PhotonSettings::proximity: 1 - coneShare of the last diffuse surface it left (the
   /// share of the light leaving there that cones leave to photons, LightProximity), else 0.
   float nearShare = 0.0f;
@@ -80,6 +83,10 @@ struct PhotonSettings {
   /// Where given, each global photon records the near share of the last diffuse surface it left
   /// (Photon::nearShare).
   std::shared_ptr<const LightProximity> proximity;
+  /// Distant lights (directional, environment) emit `distantShare` of their photons towards this
+  /// sphere (LightEmission::setDistantTarget); radius < 0: from the whole disc alone.
+  Sphere distantTarget;
+  double distantShare = 0.0;
 };
 
 /// Statistics of one tracing run.

@@ -6,6 +6,7 @@
 /// trace it further to guide emission; here it measures how many of the photons traced are of
 /// use, so that voxcone can trace as many as the seen part needs).
 
+#include "voxcone/core/bounds.h"
 #include "voxcone/core/math.h"
 #include "voxcone/photon/photon_tracer.h"
 
@@ -16,6 +17,7 @@ namespace voxcone {
 
 class Accel;
 class Scene;
+struct PhotonRadianceSettings;
 
 /// A set of grid cells, immutable after construction.
 class SeenRegion {
@@ -28,22 +30,40 @@ public:
   /// Deterministic (no randomness; any thread count).
   SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX = 64,
              int raysY = 64, int gathers = 16);
-  /// Add every cell's 26 neighbours: the region then holds every point within a cell of a seen one.
+  /// Add every cell's 26 neighbours, and every facing but the opposite one: the region then
+  /// holds every point within a cell of a seen one that does not face away from it.
   void dilate();
-  /// Whether worldPos lies in a seen cell.
-  bool contains(const Vec3& worldPos) const;
-  /// Photons of `photons` in seen cells that bounced at least `minBounces` times.
-  uint64_t count(const std::vector<Photon>& photons, int minBounces = 0) const;
+  /// Whether worldPos lies in a seen cell on a surface facing as `normal` (a photon's: turned to
+  /// the side it arrived on). Cells are kept per facing (the axis and sign the seen side's normal
+  /// leans to), so a roof's top in the cell of the ceiling seen beneath it is not seen.
+  bool contains(const Vec3& worldPos, const Vec3& normal) const;
+  /// Whether the cell of worldPos is in the region on any side.
+  bool holdsCell(const Vec3& worldPos) const;
+  /// Photons of `photons` in seen cells that `estimate` keeps (PhotonRadianceSettings::keeps).
+  uint64_t count(const std::vector<Photon>& photons, const PhotonRadianceSettings& estimate) const;
   size_t cells() const { return m_keys.size(); }
   /// The mean distance from the surfaces a `raysX` x `raysY` grid of camera rays first meets
   /// (through mirrors and glass) to what `gathers` cosine-distributed rays from each hit (rays
   /// that leave the scene left out): how far a gather's cones reach. 0 where none hits.
   static double meanGatherDistance(const Scene& scene, const Accel& accel, int width, int height, int raysX = 32,
                                    int raysY = 32, int gathers = 16);
+  /// A sphere around most of what the camera's gathers read: centred at the per-axis median of
+  /// the points a `raysX` x `raysY` grid of camera rays first meets and of what `gathers`
+  /// cosine-distributed rays from each hit, with the radius that holds the fraction `quantile`
+  /// of them (a gather that leaves through a window to ground far outside does not stretch
+  /// it). Radius -1 where none hits.
+  static Sphere readSphere(const Scene& scene, const Accel& accel, int width, int height, double quantile,
+                           int raysX = 32, int raysY = 32, int gathers = 16);
   float cellSize() const { return m_cellSize; }
 
 private:
-  uint64_t keyOf(const Vec3& worldPos) const;
+  static constexpr int kAxisBits = 20;
+  static constexpr uint64_t kAxisMask = (uint64_t(1) << kAxisBits) - 1;
+  /// A seen side's normal also counts for the facings of the axes it has this much of.
+  static constexpr float kFacingSlack = 0.3f;
+  uint64_t keyOf(const Vec3& worldPos, int facing) const;
+  /// The facing of unit normal n: 2 axis + (1 where its component along that axis is negative).
+  static int facingOf(const Vec3& n);
   float m_cellSize = 1.0f;
   Vec3 m_origin{0.0f};
   std::vector<uint64_t> m_keys;  ///< sorted, unique

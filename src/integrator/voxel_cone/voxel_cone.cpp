@@ -28,6 +28,8 @@ namespace voxcone {
 namespace {
 /// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
 constexpr double kGuidePerBin = 8.0;
+/// The share of the gathers' points the distant lights' target sphere holds (SeenRegion::readSphere).
+constexpr double kDistantQuantile = 0.9;
 /// near_light's default radius, per unit of the mean distance a gather's rays travel. Measured on
 /// a 2 m room lit by a lamp 2 cm under its ceiling (test::lampUnderCeilingScene at 64x64, the
 /// largest standard deviation of a 8x8 cell over three seeds): 0.25 / 0.5 / 1.0 gave 0.027 /
@@ -61,6 +63,7 @@ nlohmann::json VoxelConeIntegrator::statsJson() const {
   nlohmann::json j = m_stats;
   j["field_bytes"] = m_field.memoryBytes();
   j["hit_photon_bytes"] = m_hitPhotons.memoryBytes();
+  j["hit_map_photons"] = m_hitPhotons.size();
   j["hit_cache_entries"] = m_hitPhotons.cacheSize();
   j["hit_cache_estimated"] = m_hitPhotons.cacheEstimated();
   for (int level : m_field.levels()) j["active_voxels"][std::to_string(level)] = m_field.activeVoxels(level);
@@ -76,6 +79,17 @@ void VoxelConeIntegrator::reseed(uint64_t photonSeed, Progress* progress) {
 
 PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   m_stats = nlohmann::json::object();
+  // Suns and skies emit from a disc across the scene's bounding sphere, mostly onto what no
+  // gather reads (the ground around a house): distant_aim of their photons go to the sphere
+  // around most of what the gathers read instead.
+  if (m_settings.distantAim > 0.0 && (m_scene.environment || !m_scene.directionalLights.empty())) {
+    m_settings.photons.distantTarget =
+        SeenRegion::readSphere(m_scene, m_accel, m_scene.render.width, m_scene.render.height, kDistantQuantile);
+    m_settings.photons.distantShare = m_settings.distantAim;
+    m_stats["distant_target"] = {{"center", {m_settings.photons.distantTarget.center.x, m_settings.photons.distantTarget.center.y,
+                                             m_settings.photons.distantTarget.center.z}},
+                                 {"radius", m_settings.photons.distantTarget.radius}};
+  }
   PhotonSettings pilot = m_settings.photons;
   const bool guided = m_settings.photonTarget > 0 && m_settings.guideFloor > 0.0 && m_settings.guideFloor < 1.0;
   // The pilot names the bin of the finest guide's layout each photon left in (its photons are
@@ -95,15 +109,44 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   Timer t;
   const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
   const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
-  // The photons the estimates use: with direct light by shadow rays, those that bounced.
-  const int minBounces = m_settings.hitEstimate.indirectOnly ? 1 : 0;
-  std::vector<double> useful(guided ? pilot.guide->bins() : 0, 0.0);
+  // The photons counted: with direct light by shadow rays, those that bounced (the sky's own,
+  // where its light at hits comes from photons, crowd where it shines in and are not the ones
+  // the dim parts of a room lack: counted, a room lit through a window got a third of the
+  // photons, and 32x32 blocks of its ceiling moved by up to 50% from photon seed to seed).
+  PhotonRadianceSettings estimate = m_settings.hitEstimate;
+  estimate.skyDirect = false;
+  // The estimates keep the photons within a cell of what the gathers read (the sky's and the
+  // sun's land mostly on roofs and ground outside: tools/make_gltf_room.py's room held 1.6M
+  // photons in its estimate, 142 MB, and took 0.9 s to build it; 0.3M within the cells).
+  auto region = std::make_shared<SeenRegion>(seen);
+  region->dilate();
+  m_settings.hitEstimate.region = std::move(region);
+  std::vector<double> useful;
   uint64_t inSeen = 0;
-  for (size_t i = 0; i < maps.global.size(); ++i) {
-    const Photon& p = maps.global[i];
-    if (p.bounces < minBounces || !seen.contains(p.position)) continue;
-    ++inSeen;
-    if (guided) useful[maps.globalBins[i]] += 1.0;
+  const auto countUseful = [&] {
+    useful.assign(guided ? size_t(pilot.guide->bins()) : 0, 0.0);
+    inSeen = 0;
+    for (size_t i = 0; i < maps.global.size(); ++i) {
+      const Photon& p = maps.global[i];
+      if (!estimate.keeps(p) || !seen.contains(p.position, p.normal)) continue;
+      ++inSeen;
+      if (guided) useful[maps.globalBins[i]] += 1.0;
+    }
+  };
+  countUseful();
+  // A pilot too small to shape the finest guide, where the pass it would guide is far larger (a
+  // room lit through a window: 124 of 10k pilot photons of use, for a pass of 2M): once more,
+  // with enough photons for it, at most an eighth of the most allowed.
+  const double finestNeed = kGuidePerBin * double(pilot.guide ? pilot.guide->bins() : 0);
+  if (guided && double(inSeen) < finestNeed) {
+    const double perPhoton = double(std::max<uint64_t>(inSeen, 1)) / double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
+    const double mainPass = std::min(double(m_settings.maxPhotons), double(m_settings.photonTarget) / perPhoton);
+    const double bigger = std::min({finestNeed / perPhoton, double(m_settings.maxPhotons) / 8.0, mainPass / 8.0});
+    if (bigger > 2.0 * double(maps.stats.emittedGlobal)) {
+      pilot.photons = (uint64_t(std::ceil(bigger)) + 1023) / 1024 * 1024;
+      maps = tracePhotons(m_scene, m_accel, pilot, progress);
+      countUseful();
+    }
   }
   std::vector<uint32_t>().swap(maps.globalBins);
   m_stats["seen_cells"] = seen.cells();
@@ -116,13 +159,39 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
     PhotonSettings more = m_settings.photons;
     // Guided by the pilot where that is worth it: the layout its counts support (8 useful
     // photons per bin at least), and the effective number of useful photons per photon (their
-    // weights differ) at least a quarter above the unguided share.
+    // weights differ) at least a quarter above the unguided share. The count is then the one
+    // the guide's own share of useful photons asks for (the target counts photons; from the
+    // effective share the sky-room stored 755k for a target of 200k).
     if (guided && EmissionGuide::coarsen(double(inSeen), kGuidePerBin, slices, dirRes)) {
-      const std::vector<double> coarse =
-          EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), slices, dirRes);
-      auto guide = std::make_shared<EmissionGuide>(EmissionGuide::fromUseful(slices, dirRes, coarse, m_settings.guideFloor));
+      // The layouts the counts support, coarsest first; a finer one is taken where its effective
+      // yield is a tenth above the best coarser one's (its counts, which shape it, also measure it,
+      // so a fine layout looks better than it is: in tools/make_gltf_room.py's room the finest
+      // one a 250k pilot supported promised 0.11 useful photons per photon, a 10k pilot's 2 x 2
+      // directions 0.15).
+      std::vector<std::pair<int, int>> layouts;
+      for (int s = slices, d = dirRes;;) {
+        layouts.emplace_back(s, d);
+        if (d > 1) d /= 2;
+        else if (s > 1) s /= 2;
+        else break;
+      }
+      std::shared_ptr<EmissionGuide> guide;
       double usefulPer = 0.0, effectivePer = 0.0;
-      guide->expectedYield(coarse, emitted, usefulPer, effectivePer);
+      for (auto it = layouts.rbegin(); it != layouts.rend(); ++it) {
+        const std::vector<double> coarse =
+            EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), it->first, it->second);
+        auto candidate =
+            std::make_shared<EmissionGuide>(EmissionGuide::fromUseful(it->first, it->second, coarse, m_settings.guideFloor));
+        double u = 0.0, e = 0.0;
+        candidate->expectedYield(coarse, emitted, u, e);
+        if (!guide || e > 1.1 * effectivePer) {
+          guide = candidate;
+          usefulPer = u;
+          effectivePer = e;
+          slices = it->first;
+          dirRes = it->second;
+        }
+      }
       m_stats["photon_guide"] = {{"slices", slices},
                                  {"dir_res", dirRes},
                                  {"unguided_share", share},
@@ -130,7 +199,7 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
                                  {"expected_effective_share", effectivePer}};
       if (effectivePer > 1.25 * share) {
         more.guide = guide;
-        share = effectivePer;
+        share = usefulPer;
       }
       m_stats["photon_guide"]["used"] = bool(more.guide);
     }
@@ -138,7 +207,7 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
     more.photons = std::min<uint64_t>(m_settings.maxPhotons, (uint64_t(std::ceil(wanted)) + 1023) / 1024 * 1024);
     if (more.photons > maps.stats.emittedGlobal || more.guide) {
       maps = tracePhotons(m_scene, m_accel, more, progress);
-      inSeen = seen.count(maps.global, minBounces);
+      inSeen = seen.count(maps.global, estimate);
     }
   }
   m_stats["seen_photons"] = inSeen;
@@ -157,7 +226,7 @@ std::vector<Photon> VoxelConeIntegrator::nearPhotons(const PhotonMaps& maps) con
                      m_scene.render.width, m_scene.render.height, 0);
   visible.dilate();
   for (const Photon& p : maps.global)
-    if (p.nearShare > 0.0f && visible.contains(p.position)) {
+    if (p.nearShare > 0.0f && visible.contains(p.position, p.normal)) {
       near.push_back(p);
       near.back().power *= p.nearShare;
     }

@@ -110,6 +110,7 @@ private:
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
   bool m_hitDirect;
+  bool m_hitSkyRays;  ///< the sky's light at a hit by a shadow ray (else its photons carry it)
   float m_v0 = 0.0f;  ///< finest voxel size
   int m_finest = 0, m_coarsest = 0;
   Bounds3 m_fieldBounds;

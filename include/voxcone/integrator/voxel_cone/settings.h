@@ -37,6 +37,10 @@ struct VoxelConeSettings {
   /// photons were of use (EmissionGuide), each bin keeping `guideFloor` of its uniform share;
   /// 0: unguided.
   double guideFloor = 0.0;
+  /// `distant_aim`: the share of a sun's or sky's photons emitted towards the sphere around most
+  /// of what the camera's gathers read (PhotonSettings::distantTarget), the rest from the whole
+  /// disc across the scene; 0: the whole disc alone.
+  double distantAim = 0.5;
   int cones = 32;               ///< cones per gather, [1, 256] (default 32 with gather = "hit", 6 with "march")
   int chainCones = 8;           ///< cones per gather behind mirrors and glass (default 8 with "hit", `cones` with "march")
   int glossyCones = 4;          ///< most cones over one glossy lobe, [1, 64]
