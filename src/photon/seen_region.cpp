@@ -66,16 +66,17 @@ void walkGathers(const Scene& scene, const Accel& accel, int width, int height, 
 }
 }  // namespace
 
-uint64_t SeenRegion::keyOf(const Vec3& worldPos, int facing) const {
-  // 20 bits per axis, then the facing (3 bits); the grid starts at the scene's lower corner, and
-  // points outside clamp.
+std::array<uint64_t, 3> SeenRegion::cellCoords(const Vec3& worldPos) const {
+  // kAxisBits per axis; the grid starts at the scene's lower corner, and points outside clamp.
   const Vec3 q = (worldPos - m_origin) / m_cellSize;
-  uint64_t key = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double c = std::clamp(double(std::floor(q[a])), 0.0, double(kAxisMask));
-    key = (key << kAxisBits) | uint64_t(c);
-  }
-  return key << 3 | uint64_t(facing);
+  std::array<uint64_t, 3> c;
+  for (int a = 0; a < 3; ++a) c[size_t(a)] = uint64_t(std::clamp(double(std::floor(q[a])), 0.0, double(kAxisMask)));
+  return c;
+}
+
+uint64_t SeenRegion::cellOf(const Vec3& worldPos) const {
+  const std::array<uint64_t, 3> c = cellCoords(worldPos);
+  return c[0] << (2 * kAxisBits) | c[1] << kAxisBits | c[2];
 }
 
 int SeenRegion::facingOf(const Vec3& n) {
@@ -83,6 +84,16 @@ int SeenRegion::facingOf(const Vec3& n) {
   for (int a = 1; a < 3; ++a)
     if (std::fabs(n[a]) > std::fabs(n[axis])) axis = a;
   return 2 * axis + (n[axis] < 0.0f ? 1 : 0);
+}
+
+void SeenRegion::mergeCells(std::vector<uint64_t>& entries) {
+  std::sort(entries.begin(), entries.end());
+  size_t out = 0;
+  for (size_t i = 0; i < entries.size(); ++i) {
+    if (out > 0 && entries[out - 1] >> kFacingBits == entries[i] >> kFacingBits) entries[out - 1] |= entries[i];
+    else entries[out++] = entries[i];
+  }
+  entries.resize(out);
 }
 
 SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int height, float cellSize, int raysX,
@@ -93,13 +104,14 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
               [&](int y, const SurfaceHit& hit, const SurfaceHit* gathered, const Vec3& side) {
                 // Every facing the side leans into by kFacingSlack: a photon's shading normal may
                 // lean to another axis than the geometric one seen here.
-                const Vec3& p = gathered ? gathered->position : hit.position;
+                uint64_t facings = 0;
                 for (int a = 0; a < 3; ++a)
-                  if (std::fabs(side[a]) >= kFacingSlack) rows[size_t(y)].push_back(keyOf(p, 2 * a + (side[a] < 0.0f ? 1 : 0)));
+                  if (std::fabs(side[a]) >= kFacingSlack) facings |= uint64_t(1) << (2 * a + (side[a] < 0.0f ? 1 : 0));
+                rows[size_t(y)].push_back(cellOf(gathered ? gathered->position : hit.position) << kFacingBits | facings);
               });
-  for (const std::vector<uint64_t>& r : rows) m_keys.insert(m_keys.end(), r.begin(), r.end());
-  std::sort(m_keys.begin(), m_keys.end());
-  m_keys.erase(std::unique(m_keys.begin(), m_keys.end()), m_keys.end());
+  for (const std::vector<uint64_t>& r : rows) m_entries.insert(m_entries.end(), r.begin(), r.end());
+  mergeCells(m_entries);
+  index();
 }
 
 double SeenRegion::meanGatherDistance(const Scene& scene, const Accel& accel, int width, int height, int raysX,
@@ -143,9 +155,14 @@ Sphere SeenRegion::readSphere(const Scene& scene, const Accel& accel, int width,
 
 void SeenRegion::dilate() {
   std::vector<uint64_t> grown;
-  grown.reserve(m_keys.size() * 27 * 5);
-  for (const uint64_t k : m_keys) {
-    const uint64_t seenFacing = k & 7u, cell = k >> 3;
+  grown.reserve(m_entries.size() * 27);
+  for (const uint64_t e : m_entries) {
+    const uint64_t cell = e >> kFacingBits;
+    // Every facing but the opposite of a seen one: a curved surface's photons lean every way but
+    // away from the side seen.
+    uint64_t facings = 0;
+    for (int f = 0; f < 6; ++f)
+      if (e >> f & 1u) facings |= kAllFacings & ~(uint64_t(1) << (f ^ 1));
     const int64_t c[3] = {int64_t(cell >> (2 * kAxisBits)), int64_t((cell >> kAxisBits) & kAxisMask),
                           int64_t(cell & kAxisMask)};
     for (int dz = -1; dz <= 1; ++dz)
@@ -154,27 +171,67 @@ void SeenRegion::dilate() {
           const int64_t x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
           const int64_t top = int64_t(kAxisMask);
           if (x < 0 || y < 0 || z < 0 || x > top || y > top || z > top) continue;
-          const uint64_t at = ((uint64_t(x) << (2 * kAxisBits)) | (uint64_t(y) << kAxisBits) | uint64_t(z)) << 3;
-          // Every facing but the opposite one: a curved surface's photons lean every way but
-          // away from the side seen.
-          for (uint64_t f = 0; f < 6; ++f)
-            if (f != (seenFacing ^ 1u)) grown.push_back(at | f);
+          const uint64_t at = (uint64_t(x) << (2 * kAxisBits)) | (uint64_t(y) << kAxisBits) | uint64_t(z);
+          grown.push_back(at << kFacingBits | facings);
         }
   }
-  std::sort(grown.begin(), grown.end());
-  grown.erase(std::unique(grown.begin(), grown.end()), grown.end());
-  m_keys = std::move(grown);
+  mergeCells(grown);
+  m_entries = std::move(grown);
+  index();
+}
+
+void SeenRegion::index() {
+  // A dense grid of the facings over the cells' box where it is small (the photon passes' cells
+  // are 1/64 of the scene's bounding sphere: at most 65^3), for lookups without a search.
+  m_dense.clear();
+  if (m_entries.empty()) return;
+  std::array<uint64_t, 3> lo{kAxisMask, kAxisMask, kAxisMask}, hi{0, 0, 0};
+  for (const uint64_t e : m_entries) {
+    const uint64_t cell = e >> kFacingBits;
+    const uint64_t c[3] = {cell >> (2 * kAxisBits), (cell >> kAxisBits) & kAxisMask, cell & kAxisMask};
+    for (size_t a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], c[a]);
+      hi[a] = std::max(hi[a], c[a]);
+    }
+  }
+  uint64_t volume = 1;
+  for (size_t a = 0; a < 3; ++a) {
+    m_denseLo[a] = lo[a];
+    m_denseSize[a] = hi[a] - lo[a] + 1;
+    volume *= m_denseSize[a];
+    if (volume > kMaxDenseCells) return;
+  }
+  m_dense.assign(size_t(volume), 0);
+  for (const uint64_t e : m_entries) {
+    const uint64_t cell = e >> kFacingBits;
+    const uint64_t c[3] = {cell >> (2 * kAxisBits), (cell >> kAxisBits) & kAxisMask, cell & kAxisMask};
+    m_dense[size_t(((c[0] - lo[0]) * m_denseSize[1] + (c[1] - lo[1])) * m_denseSize[2] + (c[2] - lo[2]))] =
+        uint8_t(e & kAllFacings);
+  }
+}
+
+uint64_t SeenRegion::facingsAt(const Vec3& worldPos) const {
+  if (!m_dense.empty()) {
+    const std::array<uint64_t, 3> c = cellCoords(worldPos);
+    size_t at = 0;
+    for (size_t a = 0; a < 3; ++a) {
+      // Unsigned: a coordinate below the box wraps above its size.
+      const uint64_t d = c[a] - m_denseLo[a];
+      if (d >= m_denseSize[a]) return 0;
+      at = at * size_t(m_denseSize[a]) + size_t(d);
+    }
+    return m_dense[at];
+  }
+  const uint64_t cell = cellOf(worldPos);
+  const auto it = std::lower_bound(m_entries.begin(), m_entries.end(), cell << kFacingBits);
+  return it != m_entries.end() && *it >> kFacingBits == cell ? *it & kAllFacings : 0;
 }
 
 bool SeenRegion::contains(const Vec3& worldPos, const Vec3& normal) const {
-  return std::binary_search(m_keys.begin(), m_keys.end(), keyOf(worldPos, facingOf(normal)));
+  return facingsAt(worldPos) >> facingOf(normal) & 1u;
 }
 
-bool SeenRegion::holdsCell(const Vec3& worldPos) const {
-  const uint64_t first = keyOf(worldPos, 0);
-  const auto it = std::lower_bound(m_keys.begin(), m_keys.end(), first);
-  return it != m_keys.end() && (*it >> 3) == (first >> 3);
-}
+bool SeenRegion::holdsCell(const Vec3& worldPos) const { return facingsAt(worldPos) != 0; }
 
 uint64_t SeenRegion::count(const std::vector<Photon>& photons, const PhotonRadianceSettings& estimate) const {
   uint64_t n = 0;

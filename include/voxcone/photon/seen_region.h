@@ -10,6 +10,7 @@
 #include "voxcone/core/math.h"
 #include "voxcone/photon/photon_tracer.h"
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -41,7 +42,7 @@ public:
   bool holdsCell(const Vec3& worldPos) const;
   /// Photons of `photons` in seen cells that `estimate` keeps (PhotonRadianceSettings::keeps).
   uint64_t count(const std::vector<Photon>& photons, const PhotonRadianceSettings& estimate) const;
-  size_t cells() const { return m_keys.size(); }
+  size_t cells() const { return m_entries.size(); }
   /// The mean distance from the surfaces a `raysX` x `raysY` grid of camera rays first meets
   /// (through mirrors and glass) to what `gathers` cosine-distributed rays from each hit (rays
   /// that leave the scene left out): how far a gather's cones reach. 0 where none hits.
@@ -59,14 +60,29 @@ public:
 private:
   static constexpr int kAxisBits = 20;
   static constexpr uint64_t kAxisMask = (uint64_t(1) << kAxisBits) - 1;
+  /// An entry is a cell (3 x kAxisBits) above the mask of its facings (bit 2 axis + (1 where the
+  /// side faces down that axis)).
+  static constexpr int kFacingBits = 6;
+  static constexpr uint64_t kAllFacings = (uint64_t(1) << kFacingBits) - 1;
   /// A seen side's normal also counts for the facings of the axes it has this much of.
   static constexpr float kFacingSlack = 0.3f;
-  uint64_t keyOf(const Vec3& worldPos, int facing) const;
+  /// At most this many cells in the dense grid of index() (16 MB).
+  static constexpr uint64_t kMaxDenseCells = uint64_t(1) << 24;
+  std::array<uint64_t, 3> cellCoords(const Vec3& worldPos) const;
+  uint64_t cellOf(const Vec3& worldPos) const;
   /// The facing of unit normal n: 2 axis + (1 where its component along that axis is negative).
   static int facingOf(const Vec3& n);
+  /// The facings held in the cell of worldPos (0: the cell is not in the region).
+  uint64_t facingsAt(const Vec3& worldPos) const;
+  /// Sort entries by cell and merge each cell's into one (the union of their facings).
+  static void mergeCells(std::vector<uint64_t>& entries);
+  /// Rebuild m_dense from m_entries (left empty where the cells' box is too large).
+  void index();
   float m_cellSize = 1.0f;
   Vec3 m_origin{0.0f};
-  std::vector<uint64_t> m_keys;  ///< sorted, unique
+  std::vector<uint64_t> m_entries;  ///< sorted by cell, one per cell
+  std::vector<uint8_t> m_dense;     ///< the facings of each cell of the entries' box (index())
+  std::array<uint64_t, 3> m_denseLo{}, m_denseSize{};
 };
 
 }  // namespace voxcone
