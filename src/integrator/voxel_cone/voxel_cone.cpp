@@ -109,18 +109,20 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   Timer t;
   const float cell = std::max(2.0f * m_scene.boundingSphere().radius / 64.0f, 1e-30f);
   const SeenRegion seen(m_scene, m_accel, m_scene.render.width, m_scene.render.height, cell);
+  // The estimates leave out the photons in the cells the gathers read but on sides they do not
+  // (a roof above a seen ceiling), and the sky's own outside those cells (most of a sky's and a
+  // sun's land on roofs and ground outside: tools/make_gltf_room.py's room held 1.6M photons in
+  // its estimate, 142 MB, and took 0.9 s to build it). The region is dilated by a cell: it is a
+  // sample of what the gathers read.
+  auto region = std::make_shared<SeenRegion>(seen);
+  region->dilate();
+  m_settings.hitEstimate.region = std::move(region);
   // The photons counted: with direct light by shadow rays, those that bounced (the sky's own,
   // where its light at hits comes from photons, crowd where it shines in and are not the ones
   // the dim parts of a room lack: counted, a room lit through a window got a third of the
   // photons, and 32x32 blocks of its ceiling moved by up to 50% from photon seed to seed).
   PhotonRadianceSettings estimate = m_settings.hitEstimate;
   estimate.skyDirect = false;
-  // The estimates keep the photons within a cell of what the gathers read (the sky's and the
-  // sun's land mostly on roofs and ground outside: tools/make_gltf_room.py's room held 1.6M
-  // photons in its estimate, 142 MB, and took 0.9 s to build it; 0.3M within the cells).
-  auto region = std::make_shared<SeenRegion>(seen);
-  region->dilate();
-  m_settings.hitEstimate.region = std::move(region);
   std::vector<double> useful;
   uint64_t inSeen = 0;
   const auto countUseful = [&] {
