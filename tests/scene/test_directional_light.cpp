@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <unistd.h>
@@ -145,6 +146,8 @@ TEST(DirectionalLight, PhotonsAimedAtWhatTheCameraReadsCarryTheSameFlux) {
   }
   for (const Photon& p : blind.global) blindIn += inTube(p.position) ? 1 : 0;
   const double n = double(s.photons), sigma = std::sqrt(std::max(redSq - red * red / n, 0.0));
+  std::printf("floor %.4f W (16 +/- %.4f), the target's tube %.3f of the photons (blind %.4f)\n", red, 5.0 * sigma,
+              double(aimedIn) / n, double(blindIn) / n);
   EXPECT_NEAR(red, 16.0, 5.0 * sigma);
   EXPECT_LT(sigma, 0.2);
   const double r = scene.boundingSphere().radius, tubeShare = 0.25 / (r * r);
