@@ -113,7 +113,9 @@ Vec3 LightEmission::discPoint(const Vec3& d, const Vec3& centre, float radius, b
                           : whole + frame.toWorld(Vec3(sampleConcentricDisk(u) * radius, 0.0f));
   // The mixture's density at p: each part's where p lies in it (the target part may reach past
   // the whole disc; its rays there miss the scene).
-  const auto inside = [](const Vec3& q, const Vec3& c, float rad) { return glm::dot(q - c, q - c) <= rad * rad * 1.0001f; };
+  const auto inside = [](const Vec3& q, const Vec3& c, float rad) {
+    return glm::dot(q - c, q - c) <= rad * rad * 1.0001f;
+  };
   areaPdf = (inside(p, whole, radius) ? (1.0 - m_distantShare) / wholeArea : 0.0) +
             (inside(p, target, r) ? m_distantShare / targetArea : 0.0);
   if (!(areaPdf > 0.0)) areaPdf = (toTarget ? m_distantShare / targetArea : (1.0 - m_distantShare) / wholeArea);

@@ -30,7 +30,8 @@ Scene roofedRoom() {
     "materials": {"wall": {"type": "lambertian", "albedo": 0.5}},
     "shapes": [)" + test::boxQuads(Vec3(0.0f), Vec3(4.0f, 3.0f, 4.0f), "wall", true) + R"(,
       {"type": "quad", "material": "wall", "vertices": [[-1, 3.1, -1], [-1, 3.1, 5], [5, 3.1, 5], [5, 3.1, -1]]},
-      {"type": "quad", "material": "wall", "vertices": [[-10, -0.5, -10], [-10, -0.5, 10], [10, -0.5, 10], [10, -0.5, -10]]}],
+      {"type": "quad", "material": "wall",
+       "vertices": [[-10, -0.5, -10], [-10, -0.5, 10], [10, -0.5, 10], [10, -0.5, -10]]}],
     "lights": [{"type": "environment", "radiance": 1}]
   })";
   return parseScene(json, "roofed-room", ".");
