@@ -66,6 +66,10 @@ struct VoxelConeSettings {
   /// "rays", the default), the photons then only the light that bounced ("photons": all of it
   /// from the photons).
   bool hitDirect = true;
+  /// With hitDirect: the sky's light at a cone's hit from the photons straight from it
+  /// (`hit_sky` = "photons", the default; PhotonRadianceSettings::skyDirect) or by a second
+  /// shadow ray ("rays").
+  bool hitSkyPhotons = true;
   /// The environment's light at diffuse shading points (`sky_light`): "cones" takes it from the
   /// gather's cones whose exact rays leave the scene (filtered with the indirect light; shadow
   /// rays leave the environment out), "rays" by shadow rays towards it as any light; "auto"
