@@ -104,7 +104,7 @@ SeenRegion::SeenRegion(const Scene& scene, const Accel& accel, int width, int he
               [&](int y, const SurfaceHit& hit, const SurfaceHit* gathered, const Vec3& side) {
                 // Every facing the side leans into by kFacingSlack: a photon's shading normal may
                 // lean to another axis than the geometric one seen here.
-                uint64_t facings = 0;
+                uint64_t facings = uint64_t(1) << facingOf(side);
                 for (int a = 0; a < 3; ++a)
                   if (std::fabs(side[a]) >= kFacingSlack) facings |= uint64_t(1) << (2 * a + (side[a] < 0.0f ? 1 : 0));
                 rows[size_t(y)].push_back(cellOf(gathered ? gathered->position : hit.position) << kFacingBits | facings);
