@@ -173,8 +173,9 @@ bool LightEmission::sample(double uLight, float uSide, const Vec2& uPos, const V
     out.ray = Ray();
     out.ray.origin = discPoint(d, m_sphere.center, m_sphere.radius, true, uSide, uDir, areaPdf);
     out.ray.dir = d;
-    // E over the point's density (E pi R^2 on the whole disc alone), over the choice's pmf.
-    out.fluxWatts = glm::max(DVec3(dl.irradiance), DVec3(0.0)) / areaPdf / m_pmf[idx];
+    // The light's flux E pi R^2 is the whole disc's; a point drawn at another density carries it
+    // times the whole disc's density over the point's.
+    out.fluxWatts /= areaPdf * double(kPi) * double(m_sphere.radius) * double(m_sphere.radius);
     return isFinite(out.ray.origin);
   }
 

@@ -64,8 +64,6 @@ private:
   /// side faces down that axis)).
   static constexpr int kFacingBits = 6;
   static constexpr uint64_t kAllFacings = (uint64_t(1) << kFacingBits) - 1;
-  /// A seen side's normal also counts for the facings of the axes it has this much of.
-  static constexpr float kFacingSlack = 0.3f;
   /// At most this many cells in the dense grid of index() (16 MB).
   static constexpr uint64_t kMaxDenseCells = uint64_t(1) << 24;
   std::array<uint64_t, 3> cellCoords(const Vec3& worldPos) const;

@@ -29,6 +29,9 @@ namespace {
 /// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
 constexpr double kGuidePerBin = 8.0;
 /// The share of the gathers' points the distant lights' target sphere holds (SeenRegion::readSphere).
+/// Measured with distant_aim 0.5 on tools/make_gltf_room.py's room against Cycles (seeds 0-7,
+/// 32x32 blocks beyond 10%): 0.75 left 1 seed out (1.106), 0.9 none (worst 1.086), 1.0 two
+/// (1.126); on sky-room (seeds 1-3, worst 4x4 cell) 0.75 gave up to 1.079, 0.9 1.057, 1.0 1.023.
 constexpr double kDistantQuantile = 0.9;
 /// near_light's default radius, per unit of the mean distance a gather's rays travel. Measured on
 /// a 2 m room lit by a lamp 2 cm under its ceiling (test::lampUnderCeilingScene at 64x64, the
@@ -168,35 +171,11 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
     // the guide's own share of useful photons asks for (the target counts photons; from the
     // effective share the sky-room stored 755k for a target of 200k).
     if (guided && EmissionGuide::coarsen(double(inSeen), kGuidePerBin, slices, dirRes)) {
-      // The layouts the counts support, coarsest first; a finer one is taken where its effective
-      // yield is a tenth above the best coarser one's (its counts, which shape it, also measure it,
-      // so a fine layout looks better than it is: in tools/make_gltf_room.py's room the finest
-      // one a 250k pilot supported promised 0.11 useful photons per photon, a 10k pilot's 2 x 2
-      // directions 0.15).
-      std::vector<std::pair<int, int>> layouts;
-      for (int s = slices, d = dirRes;;) {
-        layouts.emplace_back(s, d);
-        if (d > 1) d /= 2;
-        else if (s > 1) s /= 2;
-        else break;
-      }
-      std::shared_ptr<EmissionGuide> guide;
+      const std::vector<double> coarse =
+          EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), slices, dirRes);
+      auto guide = std::make_shared<EmissionGuide>(EmissionGuide::fromUseful(slices, dirRes, coarse, m_settings.guideFloor));
       double usefulPer = 0.0, effectivePer = 0.0;
-      for (auto it = layouts.rbegin(); it != layouts.rend(); ++it) {
-        const std::vector<double> coarse =
-            EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), it->first, it->second);
-        auto candidate = std::make_shared<EmissionGuide>(
-            EmissionGuide::fromUseful(it->first, it->second, coarse, m_settings.guideFloor));
-        double u = 0.0, e = 0.0;
-        candidate->expectedYield(coarse, emitted, u, e);
-        if (!guide || e > 1.1 * effectivePer) {
-          guide = candidate;
-          usefulPer = u;
-          effectivePer = e;
-          slices = it->first;
-          dirRes = it->second;
-        }
-      }
+      guide->expectedYield(coarse, emitted, usefulPer, effectivePer);
       m_stats["photon_guide"] = {{"slices", slices},
                                  {"dir_res", dirRes},
                                  {"unguided_share", share},
