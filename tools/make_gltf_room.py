@@ -2,13 +2,17 @@
 """A sky-lit room as glTF 2.0, for checking the glTF loader, textures and the sky against an
 independent renderer (Blender's Cycles through its own glTF importer).
 
-    tools/make_gltf_room.py OUTDIR
+    tools/make_gltf_room.py OUTDIR [--held-out]
 
 Writes OUTDIR/room.glb (textured diffuse walls and floor as 0.15 m slabs, a window in the +z
 wall, a textured block, an emissive lamp under the ceiling, a perspective camera; the textures
 are PNGs embedded in the .glb) and OUTDIR/room.json (voxcone: the .glb as a {"type": "gltf"}
 shape, the same camera, a constant sky [0.6, 0.7, 1.0] and a ground outside). Nothing here is
 committed output: the files are small and made on demand.
+
+--held-out writes the room voxcone's defaults were not chosen on, for checking them: 5 x 2.8 x
+3.6 m, the window off centre (0.2 to 1.6 m across, 0.6 to 2.2 m high), the lamp 0.1 m under the
+ceiling at the other end, a lower block, a 20 m ground and the camera in the other corner.
 """
 
 import json
@@ -19,7 +23,17 @@ import sys
 import zlib
 
 SKY = [0.6, 0.7, 1.0]
-CAMERA = {"position": [0.6, 1.3, -1.6], "target": [-0.1, 0.8, 1.2], "fov_y_deg": 60.0}
+# The room's layout: half width (x), height, half depth (z), the window's x and y span, the
+# block's and the lamp's boxes (the lamp's top `lamp_gap` under the ceiling), the ground's half
+# size, the camera.
+ROOM = {"W": 2.0, "H": 2.6, "D": 2.0, "window_x": (-0.6, 0.6), "window_y": (0.9, 2.0),
+        "block": ([-1.2, 0, 0.2], [-0.5, 0.7, 0.9]), "lamp_xz": ((0.3, -1.0), (0.9, -0.4)), "lamp_gap": 0.02,
+        "ground": 8,
+        "camera": {"position": [0.6, 1.3, -1.6], "target": [-0.1, 0.8, 1.2], "fov_y_deg": 60.0}}
+HELD_OUT = {"W": 2.5, "H": 2.8, "D": 1.8, "window_x": (0.2, 1.6), "window_y": (0.6, 2.2),
+            "block": ([0.6, 0, -0.9], [1.4, 0.5, -0.2]), "lamp_xz": ((-1.2, 0.3), (-0.7, 0.8)), "lamp_gap": 0.1,
+            "ground": 10,
+            "camera": {"position": [-1.9, 1.6, -1.4], "target": [1.0, 0.9, 1.3], "fov_y_deg": 55.0}}
 
 
 def png(width, height, rgb_rows):
@@ -155,10 +169,15 @@ def box(lo, hi, scale=1.0):
 
 
 def main():
-    if len(sys.argv) != 2:
+    args = sys.argv[1:]
+    held_out = "--held-out" in args
+    args = [a for a in args if a != "--held-out"]
+    if len(args) != 1 or args[0].startswith("-"):
         print(__doc__, file=sys.stderr)
         sys.exit(2)
-    out = sys.argv[1]
+    out = args[0]
+    room = HELD_OUT if held_out else ROOM
+    CAMERA = room["camera"]
     os.makedirs(out, exist_ok=True)
     g = Glb()
     floor_tex = g.texture(checker(64, (186, 140, 92), (120, 82, 50), 8))
@@ -171,17 +190,21 @@ def main():
     lamp = g.material([0.8, 0.8, 0.8], emission=[12.0, 10.5, 8.0])
     ground = g.material([0.35, 0.33, 0.3])
     t = 0.15
-    W, H, D = 2.0, 2.6, 2.0  # half width (x), height, half depth (z)
-    # Floor and ceiling slabs, the four walls; the +z wall around a window 1.2 wide, 0.9 to 2.0 high.
+    W, H, D = room["W"], room["H"], room["D"]
+    (wx0, wx1), (wy0, wy1) = room["window_x"], room["window_y"]
+    (lx0, lz0), (lx1, lz1) = room["lamp_xz"]
+    gap, G = room["lamp_gap"], room["ground"]
+    # Floor and ceiling slabs, the four walls; the +z wall around the window.
     g.mesh(box([-W - t, -t, -D - t], [W + t, 0.0, D + t], 1.0), floor, "floor")
     g.mesh(box([-W - t, H, -D - t], [W + t, H + t, D + t]), white, "ceiling")
     g.mesh(box([-W - t, 0, -D - t], [-W, H, D + t], 0.5) + box([W, 0, -D - t], [W + t, H, D + t], 0.5) +
            box([-W, 0, -D - t], [W, H, -D], 0.5), wall, "walls")
-    g.mesh(box([-W, 0, D], [-0.6, H, D + t], 0.5) + box([0.6, 0, D], [W, H, D + t], 0.5) +
-           box([-0.6, 0, D], [0.6, 0.9, D + t], 0.5) + box([-0.6, 2.0, D], [0.6, H, D + t], 0.5), wall, "window-wall")
-    g.mesh(box([-1.2, 0, 0.2], [-0.5, 0.7, 0.9], 1.0), block, "block")
-    g.mesh(box([0.3, H - 0.06, -1.0], [0.9, H - 0.02, -0.4]), lamp, "lamp")
-    g.mesh([([[-8, -t - 0.01, 8], [8, -t - 0.01, 8], [8, -t - 0.01, -8], [-8, -t - 0.01, -8]], [[0, 0], [1, 0], [1, 1], [0, 1]])], ground, "ground")
+    g.mesh(box([-W, 0, D], [wx0, H, D + t], 0.5) + box([wx1, 0, D], [W, H, D + t], 0.5) +
+           box([wx0, 0, D], [wx1, wy0, D + t], 0.5) + box([wx0, wy1, D], [wx1, H, D + t], 0.5), wall, "window-wall")
+    g.mesh(box(room["block"][0], room["block"][1], 1.0), block, "block")
+    g.mesh(box([lx0, H - gap - 0.04, lz0], [lx1, H - gap, lz1]), lamp, "lamp")
+    y = -t - 0.01
+    g.mesh([([[-G, y, G], [G, y, G], [G, y, -G], [-G, y, -G]], [[0, 0], [1, 0], [1, 1], [0, 1]])], ground, "ground")
     g.camera(CAMERA["position"], CAMERA["target"], CAMERA["fov_y_deg"])
     g.write(os.path.join(out, "room.glb"))
     scene = {

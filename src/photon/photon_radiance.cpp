@@ -34,8 +34,17 @@ constexpr float kLiftProbeStart = 1e-3f;
 /// A point deeper behind x's tangent plane than this many lifts (1e-4 of the search radius,
 /// far above rounding) measures its lift's room (PhotonRadiance::lifted).
 constexpr float kBehindPlane = 2e-3f;
-/// Probes of the disc's own surface (coveredFraction): a Vogel spiral of this many points.
+/// Probes of the disc's own surface (cover): a Vogel spiral of this many points, and where some
+/// miss it (an edge, a corner), kEdgeProbes for the part's share, centroid and covariance.
 constexpr int kAreaProbes = 8;
+constexpr int kEdgeProbes = 32;
+/// Fewer covered edge probes than this: no linear fit (the part's shape is not known well enough).
+constexpr int kMinGradientProbes = 6;
+/// The part's covariance is floored by this many r^2 on each axis (a strip's width is not known
+/// to better than a probe spacing: the 32 probes lie about r / 3 apart).
+constexpr float kCovarianceFloor = 0.01f;
+/// The linear fit changes the plain estimate by at most this factor either way.
+constexpr float kMaxEdgeChange = 3.0f;
 /// Precomputed entries a point tries, nearest first, before it estimates in full.
 constexpr int kCacheCandidates = 8;
 
@@ -140,37 +149,64 @@ Vec3 PhotonRadiance::lifted(const Vec3& p, const Vec3& n, const Vec3& x, const V
   return h ? p + n * (kLiftProbeStart * lift + 0.5f * h->t) : p + n * lift;
 }
 
-float PhotonRadiance::coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r,
-                                      float lift) const {
+PhotonRadiance::DiscCover PhotonRadiance::cover(const Vec3& x, const Vec3& side, const Vec3& from, float r,
+                                                float lift, bool shape) const {
   // Probes spread uniformly over the disc (Vogel's spiral: radius sqrt((i + 1/2) / n), golden
   // angle steps), each counted when (like a photon) it is in sight of the point along the
   // surface and the surface lies under it, within the plane slab, facing the same way.
   const Frame frame(side);
   const float turn = 2.0f * kPi * pointHash(x);
   const float slab = kPlaneSlab * r;
-  int covered = 0;
-  for (int i = 0; i < kAreaProbes; ++i) {
-    const float rho = r * std::sqrt((float(i) + 0.5f) / float(kAreaProbes));
+  const auto probe = [&](int i, int probes, Vec2& at) {
+    const float rho = r * std::sqrt((float(i) + 0.5f) / float(probes));
     const float phi = turn + float(i) * 2.39996323f;
-    const Vec3 probe = x + frame.toWorld(Vec3(rho * std::cos(phi), rho * std::sin(phi), 0.0f));
+    at = Vec2(rho * std::cos(phi), rho * std::sin(phi));
+    const Vec3 point = x + frame.toWorld(Vec3(at, 0.0f));
     // The surface under the probe: a ray from the slab's top down through it.
     Ray down;
-    down.origin = probe + side * slab;
+    down.origin = point + side * slab;
     down.dir = -side;
     down.tMax = 2.0f * slab;
     const std::optional<Hit> h = m_accel->intersect(down);
-    if (!h) continue;
+    if (!h) return false;
     const SurfaceHit under = m_scene->surfaceAt(h->triangle, h->b1, h->b2);
     const Vec3 n = glm::dot(under.geomNormal, side) >= 0.0f ? under.geomNormal : -under.geomNormal;
-    if (glm::dot(n, side) <= kSameSurfaceCos) continue;
+    if (glm::dot(n, side) <= kSameSurfaceCos) return false;
     // In sight of the point, lifted off both surfaces as a photon there would be.
     Ray along;
     along.origin = from;
     along.dir = lifted(under.position, n, x, side, lift) - from;
     along.tMax = 1.0f - kShadowEpsilon;
-    if (!m_accel->occluded(along)) ++covered;
-  }
-  return float(std::max(covered, 1)) / float(kAreaProbes);
+    return !m_accel->occluded(along);
+  };
+  DiscCover out;
+  Vec2 at;
+  int covered = 0;
+  for (int i = 0; i < kAreaProbes; ++i) covered += probe(i, kAreaProbes, at) ? 1 : 0;
+  out.fraction = float(std::max(covered, 1)) / float(kAreaProbes);
+  if (covered == kAreaProbes || !shape) return out;  // the whole disc is centred on x
+  // Part of the disc: its shape, from more probes (uniform over the disc, so the covered ones are
+  // uniform over the part): the share, the centroid and the covariance of the part.
+  covered = 0;
+  Vec2 sum(0.0f);
+  float sxx = 0.0f, sxy = 0.0f, syy = 0.0f;
+  for (int i = 0; i < kEdgeProbes; ++i)
+    if (probe(i, kEdgeProbes, at)) {
+      ++covered;
+      sum += at;
+      sxx += at.x * at.x;
+      sxy += at.x * at.y;
+      syy += at.y * at.y;
+    }
+  out.fraction = float(std::max(covered, 1)) / float(kEdgeProbes);
+  if (covered < kMinGradientProbes) return out;
+  const float n = float(covered);
+  out.centroid = sum / n;
+  out.xx = sxx / n - out.centroid.x * out.centroid.x;
+  out.xy = sxy / n - out.centroid.x * out.centroid.y;
+  out.yy = syy / n - out.centroid.y * out.centroid.y;
+  out.part = true;
+  return out;
 }
 
 Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3& side, float* radius,
@@ -206,10 +242,13 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
   if (radius) *radius = r;
   const float lift = kLift * r;
   const Vec3 from = x + side * (lift + glm::dot(glm::abs(side), xError));
+  const Frame planeFrame(side);  // the disc's plane, as cover() lays its probes in it
   // With k found, the k-th photon only marks the radius: (k - 1) / (pi r_k^2) is the unbiased
   // density of a uniform process, k / (pi r_k^2) is k / (k - 1) too high (Jensen's estimate
   // counts it; at k = 32 the hall came out 3% brighter).
   const size_t counted = usable == size_t(k) && k > 1 ? neighbors.size() - 1 : neighbors.size();
+  thread_local std::vector<std::pair<Vec2, Vec3>> used;  // in the disc's plane, the flux
+  used.clear();
   Vec3 sum(0.0f);
   for (size_t i = 0; i < counted; ++i) {
     if (!counts(neighbors[i].index)) continue;
@@ -222,7 +261,11 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
     ray.dir = lifted(ph.position, ph.normal, x, side, lift) - from;
     ray.tMax = 1.0f - kShadowEpsilon;
     if (m_accel->occluded(ray)) continue;
-    sum += lobe ? bsdfEval(*lobe->material, lobe->wo, lobe->frame.toLocal(ph.incident)) * ph.power : ph.power;
+    const Vec3 flux =
+        lobe ? bsdfEval(*lobe->material, lobe->wo, lobe->frame.toLocal(ph.incident)) * ph.power : ph.power;
+    sum += flux;
+    used.emplace_back(Vec2(0.0f), flux);
+    used.back().first = Vec2(glm::dot(ph.position - x, planeFrame.s), glm::dot(ph.position - x, planeFrame.t));
   }
   // Left-out photons carry their share of the flux: the rest stand for all of it.
   if (skipStride > 1) sum *= float(skipStride) / float(skipStride - 1);
@@ -230,7 +273,26 @@ Vec3 PhotonRadiance::irradianceAt(const Vec3& x, const Vec3& xError, const Vec3&
   // Jensen eq. 7.6 before the BSDF, E = sum Phi / (pi r^2), over the part of the disc that is
   // this surface in sight of the point: at a corner or an edge half the disc is not (a wall, a
   // drop), and the plain estimate came out up to half as bright there.
-  return sum / (kPi * r2 * coveredFraction(x, side, from, r, lift));
+  const DiscCover part = cover(x, side, from, r, lift, m_settings.edgeFit);
+  const float area = kPi * r2 * part.fraction;
+  if (!part.part) return sum / area;
+  // A part of the disc (an edge, a corner) is not centred on x: the plain estimate is the light
+  // at the part's centroid c, and where the light changes across the part (a wall's top beside
+  // the ceiling, lit less than lower down) that is not x's. A linear fit over the part (local
+  // linear density estimation): E(p) = E(c) + g.(p - c), with sum Phi_i (p_i - c) = A S g (S the
+  // part's covariance) gives E(x) = sum Phi_i (1 - c^T S^-1 (p_i - c)) / A. Regularized where the
+  // part is a thin strip; the fit's change kept within kMaxEdgeChange of the plain estimate.
+  const float reg = kCovarianceFloor * r2;
+  const float a = part.xx + reg, b = part.xy, d = part.yy + reg;
+  const float det = a * d - b * b;
+  if (!(det > 0.0f)) return sum / area;
+  // q = S^-1 c: the weight of photon i is 1 - q.(p_i - c).
+  const Vec2 q((d * part.centroid.x - b * part.centroid.y) / det, (a * part.centroid.y - b * part.centroid.x) / det);
+  Vec3 fit(0.0f);
+  for (const auto& [at, flux] : used) fit += flux * (1.0f - glm::dot(q, at - part.centroid));
+  if (skipStride > 1) fit *= float(skipStride) / float(skipStride - 1);
+  fit = glm::clamp(fit, sum / kMaxEdgeChange, sum * kMaxEdgeChange);
+  return fit / area;
 }
 
 bool PhotonRadiance::cachedIrradiance(const Vec3& x, const Vec3& xError, const Vec3& side, Vec3& out) const {

@@ -66,6 +66,9 @@ struct PhotonRadianceSettings {
   /// Where given (the cells the gathers read, SeenRegion), the photons in its cells on sides
   /// it does not hold are left out, and the sky's straight photons outside it.
   std::shared_ptr<const SeenRegion> region = nullptr;
+  /// Where only part of the disc is this surface in sight of the point (an edge, a corner), the
+  /// light taken at the point by a linear fit over that part rather than as the part's mean.
+  bool edgeFit = false;
   /// Whether the estimate uses photon p.
   bool keeps(const Photon& p) const;
 };
@@ -102,10 +105,17 @@ public:
   size_t cacheEstimated() const;
 
 private:
-  /// The fraction of the disc of radius r around `hit` (in its tangent plane, side `side`) that
-  /// passes the photons' filters: the surface under it, in sight of `from` (the hit lifted by
-  /// `lift`). At least 1 / kAreaProbes.
-  float coveredFraction(const Vec3& x, const Vec3& side, const Vec3& from, float r, float lift) const;
+  /// The part of the disc of radius r around x (in its tangent plane, side `side`, coordinates in
+  /// Frame(side)'s s and t) that passes the photons' filters: the surface under it, in sight of
+  /// `from` (x lifted by `lift`). Its share from kAreaProbes probes; with `shape`, where that is
+  /// not the whole disc, its share and shape from kEdgeProbes.
+  struct DiscCover {
+    float fraction = 1.0f;   ///< its share of the disc, at least one probe's
+    bool part = false;       ///< not the whole disc, and its shape below is known
+    Vec2 centroid{0.0f};     ///< its centroid, relative to x
+    float xx = 0.0f, xy = 0.0f, yy = 0.0f;  ///< its covariance
+  };
+  DiscCover cover(const Vec3& x, const Vec3& side, const Vec3& from, float r, float lift, bool shape) const;
   /// Surface point p (a photon's, a probe's) lifted along its unit normal n by `lift`, for a
   /// segment from `from` above x (side `side`). When p lies behind x's tangent plane, by half
   /// the way to the nearest surface along n instead, if that is nearer: a point on the inner

@@ -187,6 +187,9 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
                                       : (out.hitGather && out.hitPhotons ? kNearLightAuto : 0.0f);
   if (out.nearLight > 0.0f && !(out.hitGather && out.hitPhotons))
     throw SettingsError("voxcone.near_light: needs gather = \"hit\" and hit_radiance = \"photons\"");
+  const std::string edgeFit = r.choice("edge_fit", {"near", "all", "off"});
+  out.nearEdgeFit = edgeFit != "off";
+  out.hitEstimate.edgeFit = edgeFit == "all";
   const std::string view = r.choice("view", viewNames());
   out.view = View(std::find(viewNames().begin(), viewNames().end(), view) - viewNames().begin());
   r.finish();
@@ -229,6 +232,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"hit_radius", hitEstimate.maxRadius},
           {"hit_cache", hitEstimate.cacheStride},
           {"near_light", nearLight == kNearLightAuto ? nlohmann::json("auto") : nlohmann::json(nearLight)},
+          {"edge_fit", hitEstimate.edgeFit ? "all" : (nearEdgeFit ? "near" : "off")},
           {"view", viewNames()[size_t(view)]},
           {"field", fieldPath}};
 }

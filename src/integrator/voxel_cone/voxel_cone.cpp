@@ -262,7 +262,11 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
     std::vector<Photon> near = nearPhotons(maps);
     if (m_proximity) m_stats["near_light"] = {{"radius", m_proximity->radius()}, {"photons", near.size()}};
-    m_nearPhotons = PhotonRadiance(m_scene, m_accel, std::move(near), m_settings.hitEstimate);
+    // Few of those photons reach far from the lamps, and there their discs are wide: at an
+    // edge the part's mean is far from the point's light (PhotonRadianceSettings::edgeFit).
+    PhotonRadianceSettings nearEstimate = m_settings.hitEstimate;
+    nearEstimate.edgeFit = m_settings.nearEdgeFit;
+    m_nearPhotons = PhotonRadiance(m_scene, m_accel, std::move(near), nearEstimate);
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
   const uint64_t photonPeak = peakRssBytes();

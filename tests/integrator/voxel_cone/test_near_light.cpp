@@ -132,7 +132,8 @@ TEST(NearLight, TheImageDoesNotDependOnTheSplitsRadius) {
 // from seed to seed (one cone in thousands meets the ceiling above the lamp). The 2.9% is, as
 // far as we can tell, the photon estimate's blur where the gathering points take the light from
 // beside the lamp: the light that leaves the 2 cm gap lands in strips that the estimate's disc
-// (up to hit_radius, 0.17 m here) spreads.
+// (up to hit_radius, 0.17 m here) spreads. With those estimates fitted at edges (edge_fit:
+// near): the mean 1.031, worst cell 0.069, seeds 0.040 apart.
 TEST(NearLight, ALampUnderTheCeilingMatchesPathAndNoCellMovesWithTheSeed) {
   const Scene scene = lampUnderCeilingScene(0.02f, 48, 16);
   RenderSettings p = scene.render;

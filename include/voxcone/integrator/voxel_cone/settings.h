@@ -83,6 +83,11 @@ struct VoxelConeSettings {
   /// distance a gather's rays travel (SeenRegion::meanGatherDistance), resolved in prepare().
   float nearLight = 0.0f;
   static constexpr float kNearLightAuto = -1.0f;
+  /// `edge_fit`: where only part of an estimate's disc is its surface (an edge, a corner), the
+  /// light at the point by a linear fit over that part (PhotonRadianceSettings::edgeFit) in the
+  /// near_light photons' estimates ("near", the default), in those and the cones' hits ("all"),
+  /// or in none ("off").
+  bool nearEdgeFit = true;
   View view = View::Full;
   /// `field`: a .vdb written by `voxcone voxelize -o` (VoxelField::write) to render with instead
   /// of tracing photons and voxelizing; its settings (levels, footprint, mip filter, photons)
