@@ -10,7 +10,7 @@ namespace {
 double luminanceD(const DVec3& rgb) { return 0.2126 * rgb.x + 0.7152 * rgb.y + 0.0722 * rgb.z; }
 }  // namespace
 
-LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scene.boundingSphere()) {
+LightEmission::LightEmission(const Scene& scene, bool localOnly) : m_scene(scene), m_sphere(scene.boundingSphere()) {
   // Emissive triangles: flux of a Lambertian emitter, pi * Le * A per emitting side.
   std::vector<double> power;
   for (uint32_t t = 0; t < scene.triangles.size(); ++t) {
@@ -39,7 +39,7 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scen
   }
 
   // Directional lights: the flux through the bounding sphere's cross-section, E pi R^2.
-  for (size_t i = 0; i < scene.directionalLights.size(); ++i) {
+  for (size_t i = 0; i < (localOnly ? 0 : scene.directionalLights.size()); ++i) {
     Light l;
     l.directional = static_cast<int32_t>(i);
     const double r = double(m_sphere.radius);
@@ -52,7 +52,7 @@ LightEmission::LightEmission(const Scene& scene) : m_scene(scene), m_sphere(scen
 
   // The environment: pi R^2 times its radiance's integral over the sphere (the flux through a
   // disc of radius R facing each direction).
-  if (scene.environment) {
+  if (scene.environment && !localOnly) {
     Light l;
     l.environment = true;
     const double r = double(m_sphere.radius);

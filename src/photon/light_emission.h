@@ -32,8 +32,9 @@ public:
   /// Collects the emissive triangles (positive area and flux), the point lights with positive
   /// luminance of intensity, the directional lights with positive luminance of irradiance
   /// (emitting from a disc that covers the scene's bounding sphere, pbrt's distant light) and
-  /// the environment (from such a disc facing each direction it draws).
-  explicit LightEmission(const Scene& scene);
+  /// the environment (from such a disc facing each direction it draws); with `localOnly` the
+  /// lamps alone (emissive triangles and point lights).
+  explicit LightEmission(const Scene& scene, bool localOnly = false);
 
   /// Distant lights (directional, environment) then emit a share `share` in (0, 1) of their
   /// photons from the disc of `target`'s radius around its centre's projection (what the camera
@@ -52,6 +53,8 @@ public:
   const DVec3& totalFlux() const { return m_totalFlux; }
   /// Probability of choosing light `i` (emissive triangles first, then point lights).
   double pmf(size_t i) const { return m_pmf[i]; }
+  /// Whether light `i` is a lamp (an emissive triangle or a point light), not a sun or the sky.
+  bool local(size_t i) const { return m_lights[i].directional < 0 && !m_lights[i].environment; }
 
   /// Sample an emitted photon. uLight in [0,1) chooses the light (double, so that lights of
   /// probability below float resolution keep their share), uSide in [0,1) the side of a

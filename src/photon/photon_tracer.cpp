@@ -161,12 +161,19 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
 
 }  // namespace
 
+double lampPhotonShare(const Scene& scene) {
+  const LightEmission lights(scene);
+  double share = 0.0;
+  for (size_t i = 0; i < lights.lightCount(); ++i) share += lights.local(i) ? lights.pmf(i) : 0.0;
+  return share;
+}
+
 PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSettings& settings, Progress* progress) {
   const auto t0 = std::chrono::steady_clock::now();
   Progress nullProgress;
   Progress& prog = progress ? *progress : nullProgress;
   PhotonMaps maps;
-  LightEmission lights(scene);
+  LightEmission lights(scene, settings.localOnly);
   lights.setDistantTarget(settings.distantTarget, settings.distantShare);
   // Where caustic photons are aimed: the bounding sphere of the delta triangles (none: not aimed).
   Sphere aim;

@@ -133,6 +133,34 @@ TEST(PhotonEmission, MixedColourLightsCarryExpectedFluxPerChannel) {
   for (const Photon& p : maps.global) EXPECT_TRUE(p.power.x == 0.0f || p.power.z == 0.0f);
 }
 
+TEST(PhotonEmission, TheLampsAloneLeaveTheSkyAndTheSunOut) {
+  // The red point light and blue patch of the test above, and outside the absorbing sphere a
+  // green sky (radiance 1 all round: flux pi R^2 4 pi, R the scene's bounding sphere's) and a
+  // green sun. With localOnly the pass carries the lamps' flux alone, channel by channel, and
+  // not one photon has green; lampPhotonShare is the lamps' share of the luminance of flux.
+  const Scene scene = makeScene(
+      R"("wall": {"type": "lambertian", "albedo": 0}, "lamp": {"type": "lambertian", "albedo": 0, "emission": [0, 0, 20]})",
+      R"({"type": "sphere", "center": [0, 0, 0], "radius": 2, "subdivisions": 3, "material": "wall"},)" +
+          hquad(-0.5f, 0.25f, "lamp", false),
+      R"({"type": "point", "position": [0, 0.5, 0], "intensity": [1, 0, 0]},
+         {"type": "environment", "radiance": [0, 1, 0]},
+         {"type": "directional", "direction": [0, -1, 0], "irradiance": [0, 2, 0]})");
+  const Hbvh accel(scene);
+  PhotonSettings s = photonSettings(50000, 0);
+  s.localOnly = true;
+  const PhotonMaps maps = tracePhotons(scene, accel, s);
+  const double red = 4.0 * kPi, blue = kPi * 20.0 * 0.25;
+  EXPECT_NEAR(maps.stats.emittedPower.x, red, 1e-5 * red);
+  EXPECT_EQ(maps.stats.emittedPower.y, 0.0f);
+  EXPECT_NEAR(maps.stats.emittedPower.z, blue, 1e-5 * blue);
+  ASSERT_GT(maps.global.size(), 0u);
+  for (const Photon& p : maps.global) ASSERT_EQ(p.power.y, 0.0f);
+  const double R = scene.boundingSphere().radius;
+  const double green = kPi * R * R * 4.0 * kPi + 2.0 * kPi * R * R;
+  const double lamps = 0.2126 * red + 0.0722 * blue;
+  EXPECT_NEAR(lampPhotonShare(scene), lamps / (lamps + 0.7152 * green), 1e-6);
+}
+
 TEST(PhotonEmission, OneAndTwoSidedEmitters) {
   // An emitter at y = 1 facing down between an absorbing floor (y = 0) and ceiling (y = 2):
   // one-sided, every stored photon is on the floor; two-sided, the flux doubles and each side

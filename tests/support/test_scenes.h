@@ -90,8 +90,9 @@ inline std::string boxQuads(const Vec3& lo, const Vec3& hi, const std::string& m
 /// A closed 2 m room (Lambertian 0.7) lit only by a 0.6 x 0.6 x 0.04 m lamp box (emission 10,
 /// albedo 0.8) hanging `gap` under the ceiling, with a red block on the floor; the camera, at
 /// `size` x `size` pixels, looks away from the lamp. The ceiling above the lamp is lit to many
-/// times anything else and seen only through the gap.
-inline Scene lampUnderCeilingScene(float gap, int size, int spp) {
+/// times anything else and seen only through the gap. `lights`: the scene's lights beside the
+/// lamp (a JSON list), outside the room.
+inline Scene lampUnderCeilingScene(float gap, int size, int spp, const std::string& lights = "[]") {
   const std::string json = R"({
     "camera": {"position": [1, 1.1, 0.2], "target": [0.8, 1.2, 2], "up": [0, 1, 0], "fov_y_deg": 70},
     "render": {"width": )" + std::to_string(size) + R"(, "height": )" + std::to_string(size) + R"(, "spp": )" +
@@ -101,7 +102,7 @@ inline Scene lampUnderCeilingScene(float gap, int size, int spp) {
     "shapes": [)" + boxQuads(Vec3(0.0f), Vec3(2.0f), "wall", true) + ",\n" +
                            boxQuads(Vec3(0.7f, 2.0f - gap - 0.04f, 0.3f), Vec3(1.3f, 2.0f - gap, 0.9f), "lamp", false) +
                            ",\n" + boxQuads(Vec3(0.2f, 0.0f, 1.2f), Vec3(0.7f, 0.6f, 1.7f), "red", false) + R"(],
-    "lights": []
+    "lights": )" + lights + R"(
   })";
   return parseScene(json, "lamp-under-ceiling", ".");
 }

@@ -87,7 +87,13 @@ struct PhotonSettings {
   /// sphere (LightEmission::setDistantTarget); radius < 0: from the whole disc alone.
   Sphere distantTarget;
   double distantShare = 0.0;
+  /// The lamps alone emit (emissive triangles and point lights), by their power among themselves.
+  bool localOnly = false;
 };
+
+/// The share of a pass's photons that leave lamps (emissive triangles and point lights), not the
+/// sky or a sun: their share of the power the lights are chosen by.
+double lampPhotonShare(const Scene& scene);
 
 /// Statistics of one tracing run.
 struct PhotonStats {

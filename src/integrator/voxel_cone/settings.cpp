@@ -140,6 +140,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   const int target = render.denoise ? kDenoisedPhotonTarget : kDefaultPhotonTarget;
   out.photonTarget = uint64_t(r.integer("photon_target", photonsGiven ? 0 : target, 0, kMaxInt));
   out.maxPhotons = uint64_t(r.integer("max_photons", kDefaultMaxPhotons, 1, kMaxInt));
+  out.lampPhotons = uint64_t(r.integer("lamp_photons", int(out.photonTarget / 2), 0, kMaxInt));
   if (photonsGiven && out.photonTarget > 0)
     throw SettingsError("voxcone.photon_target: the photon count is given (photons); give one or the other");
   out.guideFloor = r.number("photon_guide", kDefaultGuideFloor, 0.0, 1.0);
@@ -206,6 +207,7 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"photons", photons.photons},
           {"photon_target", photonTarget},
           {"max_photons", maxPhotons},
+          {"lamp_photons", lampPhotons},
           {"photon_guide", guideFloor},
           {"distant_aim", distantAim},
           {"caustic_photons", photons.causticPhotons},

@@ -650,7 +650,7 @@ TEST(VoxelCone, BadOptionsAreSettingsErrors) {
                           R"({"photon_guide": -0.1})", R"({"photon_guide": 1.5})", R"({"photon_guide": "yes"})",
                           R"({"glossy_cones": 0})", R"({"glossy_cones": 65})", R"({"glossy_switch": 0})",
                           R"({"distant_aim": -0.1})", R"({"distant_aim": 1})", R"({"hit_sky": "cones"})",
-                          R"({"edge_fit": "hit"})", R"({"edge_fit": true})"}) {
+                          R"({"edge_fit": "hit"})", R"({"edge_fit": true})", R"({"lamp_photons": -1})"}) {
     IntegratorContext ctx{scene, accel, scene.render, nlohmann::json::parse(bad)};
     EXPECT_THROW(createIntegrator("voxcone", ctx), SettingsError) << bad;
   }
