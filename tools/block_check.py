@@ -35,7 +35,8 @@ def main():
               if lum(r["mean_reference"]) > 0]
     worst = max(ratios, key=lambda x: abs(x[0] - 1.0))
     outside = [x for x in ratios if abs(x[0] - 1.0) > a.block_tol]
-    print(f"{a.test} vs {a.ref}: PSNR {d['psnr_srgb8']:.2f} dB, relMSE {d['relmse']:.4g}")
+    psnr = "inf" if d["psnr_srgb8"] is None else f"{d['psnr_srgb8']:.2f}"  # None: the images are equal
+    print(f"{a.test} vs {a.ref}: PSNR {psnr} dB, relMSE {d['relmse']:.4g}")
     print(f"  image mean ratio {mean:.4f} (bound 1 +/- {a.mean_tol})")
     print(f"  blocks {len(ratios)}: ratio min {min(r for r, _ in ratios):.4f}, max {max(r for r, _ in ratios):.4f}; "
           f"worst {worst[0]:.4f} at x {worst[1]['x0']}-{worst[1]['x1']}, y {worst[1]['y0']}-{worst[1]['y1']}; "

@@ -2,7 +2,7 @@
 """A sky-lit room as glTF 2.0, for checking the glTF loader, textures and the sky against an
 independent renderer (Blender's Cycles through its own glTF importer).
 
-    tools/make_gltf_room.py OUTDIR [--held-out]
+    tools/make_gltf_room.py OUTDIR [--held-out | --held-out-2]
 
 Writes OUTDIR/room.glb (textured diffuse walls and floor as 0.15 m slabs, a window in the +z
 wall, a textured block, an emissive lamp under the ceiling, a perspective camera; the textures
@@ -13,6 +13,8 @@ committed output: the files are small and made on demand.
 --held-out writes the room voxcone's defaults were not chosen on, for checking them: 5 x 2.8 x
 3.6 m, the window off centre (0.2 to 1.6 m across, 0.6 to 2.2 m high), the lamp 0.1 m under the
 ceiling at the other end, a lower block, a 20 m ground and the camera in the other corner.
+--held-out-2 another: 3.5 x 2.5 x 4.5 m, a small window by a corner (0.5 to 1.5 m across, 1.0
+to 2.1 m high), the lamp 0.3 m under the ceiling and in view, a taller block, a 24 m ground.
 """
 
 import json
@@ -34,6 +36,10 @@ HELD_OUT = {"W": 2.5, "H": 2.8, "D": 1.8, "window_x": (0.2, 1.6), "window_y": (0
             "block": ([0.6, 0, -0.9], [1.4, 0.5, -0.2]), "lamp_xz": ((-1.2, 0.3), (-0.7, 0.8)), "lamp_gap": 0.1,
             "ground": 10,
             "camera": {"position": [-1.9, 1.6, -1.4], "target": [1.0, 0.9, 1.3], "fov_y_deg": 55.0}}
+HELD_OUT_2 = {"W": 1.75, "H": 2.5, "D": 2.25, "window_x": (0.5, 1.5), "window_y": (1.0, 2.1),
+              "block": ([-1.4, 0, 0.5], [-0.6, 0.9, 1.5]), "lamp_xz": ((-0.5, -1.0), (0.0, -0.5)), "lamp_gap": 0.3,
+              "ground": 12,
+              "camera": {"position": [1.2, 1.4, -1.9], "target": [-0.6, 1.0, 1.5], "fov_y_deg": 65.0}}
 
 
 def png(width, height, rgb_rows):
@@ -169,14 +175,15 @@ def box(lo, hi, scale=1.0):
 
 
 def main():
+    layouts = {"--held-out": HELD_OUT, "--held-out-2": HELD_OUT_2}
     args = sys.argv[1:]
-    held_out = "--held-out" in args
-    args = [a for a in args if a != "--held-out"]
-    if len(args) != 1 or args[0].startswith("-"):
+    chosen = [a for a in args if a in layouts]
+    args = [a for a in args if a not in layouts]
+    if len(args) != 1 or args[0].startswith("-") or len(chosen) > 1:
         print(__doc__, file=sys.stderr)
         sys.exit(2)
     out = args[0]
-    room = HELD_OUT if held_out else ROOM
+    room = layouts[chosen[0]] if chosen else ROOM
     CAMERA = room["camera"]
     os.makedirs(out, exist_ok=True)
     g = Glb()
