@@ -201,6 +201,34 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   return maps;
 }
 
+void VoxelConeIntegrator::addLampPass(std::vector<Photon>& near, uint64_t emitted, Progress* progress) {
+  // Where a sky or a sun takes most of the photons, the lamps' few light the gathering points
+  // from their surroundings through a thin map (tools/make_gltf_room.py --held-out: 14k of 2M
+  // photons left its lamp, and with edge_fit alone the top of the wall above its window still
+  // came out 1.10 of Cycles at two of eight seeds): a pass of the lamps' own photons makes them up
+  // to lamp_photons. Both passes estimate the same light; each weighs in by its share of the lamp
+  // photons (by the power they are chosen by: a guided main pass may have sent more).
+  const double lampShare = lampPhotonShare(m_scene);
+  const double fromMain = lampShare * double(emitted);
+  const double wanted = double(m_settings.lampPhotons);
+  if (!(lampShare > 0.0) || !(fromMain < wanted / kNearLampStarved)) return;
+  PhotonSettings lamps = m_settings.photons;
+  lamps.photons = std::min<uint64_t>(m_settings.maxPhotons, uint64_t(std::ceil(wanted - fromMain) + 1023) / 1024 * 1024);
+  lamps.causticPhotons = 0;
+  lamps.guide.reset();
+  lamps.recordBins = false;
+  lamps.localOnly = true;
+  lamps.seed = mixBits(m_settings.photons.seed ^ 0x6c616d7073ULL);
+  const PhotonMaps more = tracePhotons(m_scene, m_accel, lamps, progress);
+  const float mainWeight = float(fromMain / (fromMain + double(lamps.photons)));
+  for (Photon& p : near) p.power *= mainWeight;
+  for (Photon p : nearPhotons(more)) {
+    p.power *= 1.0f - mainWeight;
+    near.push_back(p);
+  }
+  m_stats["near_light"]["lamp_pass"] = {{"emitted", lamps.photons}, {"from_main", fromMain}, {"seconds", more.stats.seconds}};
+}
+
 std::vector<Photon> VoxelConeIntegrator::nearPhotons(const PhotonMaps& maps) const {
   std::vector<Photon> near;
   if (!m_proximity) return near;
@@ -264,35 +292,7 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     m_hitPhotons = PhotonRadiance(m_scene, m_accel, maps, m_settings.hitEstimate);
     std::vector<Photon> near = nearPhotons(maps);
     if (m_proximity) {
-      // Where a sky or a sun takes most of the photons, the lamps' few light the gathering
-      // points from their surroundings through a thin map (tools/make_gltf_room.py --held-out:
-      // 14k of 2M photons left its lamp, and the top of a wall came out up to 13% too bright): a
-      // pass of the lamps' own photons makes them up to lamp_photons. Both passes estimate the
-      // same light; each weighs in by its share of the lamp photons (by the power they are chosen
-      // by: a guided main pass may have sent more).
-      const double lampShare = lampPhotonShare(m_scene);
-      const double fromMain = lampShare * double(maps.stats.emittedGlobal);
-      const double wanted = double(m_settings.lampPhotons);
-      uint64_t extra = 0;
-      if (lampShare > 0.0 && fromMain < wanted / kNearLampStarved)
-        extra = std::min<uint64_t>(m_settings.maxPhotons, uint64_t(std::ceil(wanted - fromMain) + 1023) / 1024 * 1024);
-      if (extra > 0) {
-        PhotonSettings lamps = m_settings.photons;
-        lamps.photons = extra;
-        lamps.causticPhotons = 0;
-        lamps.guide.reset();
-        lamps.recordBins = false;
-        lamps.localOnly = true;
-        lamps.seed = mixBits(m_settings.photons.seed ^ 0x6c616d7073ULL);
-        const PhotonMaps more = tracePhotons(m_scene, m_accel, lamps, progress);
-        const float mainWeight = float(fromMain / (fromMain + double(extra)));
-        for (Photon& p : near) p.power *= mainWeight;
-        for (Photon p : nearPhotons(more)) {
-          p.power *= 1.0f - mainWeight;
-          near.push_back(p);
-        }
-        m_stats["near_light"]["lamp_pass"] = {{"emitted", extra}, {"from_main", fromMain}, {"seconds", more.stats.seconds}};
-      }
+      addLampPass(near, maps.stats.emittedGlobal, progress);
       m_stats["near_light"]["radius"] = m_proximity->radius();
       m_stats["near_light"]["photons"] = near.size();
     }

@@ -216,6 +216,10 @@ private:
   /// The photons that left surfaces beside the lamps, where the camera sees, each with its near
   /// share of its power (m_nearPhotons' photons).
   std::vector<Photon> nearPhotons(const PhotonMaps& maps) const;
+  /// With near_light, where the main pass (`emitted` photons) sent fewer than lamp_photons /
+  /// kNearLampStarved from the lamps (a sky or a sun took them by power): the near photons of a
+  /// pass of the lamps' own photons join `near`, each pass's weighted by its share.
+  void addLampPass(std::vector<Photon>& near, uint64_t emitted, Progress* progress);
   /// Trace the photons, voxelize unless `keepVoxels` (and a field exists), inject, build mips.
   void build(bool keepVoxels, Progress* progress);
   /// The cone tracer over the field just built or read, and the caustic voxel size.
