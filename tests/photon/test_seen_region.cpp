@@ -104,6 +104,12 @@ TEST(SeenRegion, TheEstimateKeepsWhatTheGathersCanRead) {
   EXPECT_FALSE(s.keeps(floorFromLamp));
   EXPECT_TRUE(s.keeps(groundBounced));   // a cell the region does not read: it may be of use
   EXPECT_FALSE(s.keeps(groundFromSky));  // but not the sky's straight photons there
+  // Where the sky's photons are not kept, a cone's hit takes the sky by a shadow ray
+  // (keepsSky): the ground outside, the roof; and everywhere without skyDirect.
+  EXPECT_TRUE(s.keepsSky(floorFromSky.position, up));
+  EXPECT_FALSE(s.keepsSky(groundFromSky.position, up));
+  EXPECT_FALSE(s.keepsSky(roofFromSky.position, up));
+  EXPECT_FALSE(bounced.keepsSky(floorFromSky.position, up));
   // count() takes the kept photons in seen cells.
   EXPECT_EQ(region->count({ceilingBounced, roofBounced, floorFromSky, floorFromLamp, groundBounced}, s), 2u);
 }

@@ -71,6 +71,9 @@ struct PhotonRadianceSettings {
   bool edgeFit = false;
   /// Whether the estimate uses photon p.
   bool keeps(const Photon& p) const;
+  /// Whether the sky's straight photons at p (on the side facing n) are kept (skyDirect, in the
+  /// region): where they are not, the sky's light there has to come another way.
+  bool keepsSky(const Vec3& p, const Vec3& n) const;
 };
 
 /// Photon density estimates at surface points with the filters above. Immutable after
@@ -103,6 +106,7 @@ public:
   /// Entries of the precomputed irradiance, and how many of them lookups have estimated so far.
   size_t cacheSize() const { return m_cache.size(); }
   size_t cacheEstimated() const;
+  const PhotonRadianceSettings& settings() const { return m_settings; }
 
 private:
   /// The part of the disc of radius r around x (in its tangent plane, side `side`, coordinates in

@@ -9,7 +9,6 @@
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/photon/light_proximity.h"
 #include "voxcone/photon/photon_radiance.h"
-#include "voxcone/photon/seen_region.h"
 #include "voxcone/scene/bsdf.h"
 #include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
@@ -26,8 +25,7 @@ ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField&
       m_proximity(m_photons && proximity && !proximity->empty() ? proximity : nullptr),
       m_coneStep(s.coneStep), m_maxDistance(s.maxDistance), m_exactSegment(s.exactSegment),
       m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect),
-      m_hitSkyRays(m_hitDirect && !s.hitEstimate.skyDirect),
-      m_skyRegion(m_hitDirect && s.hitEstimate.skyDirect ? s.hitEstimate.region : nullptr) {
+      m_hitEnvironment(m_hitDirect && scene.environment) {
   const std::vector<int> levels = m_field.levels();
   if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
   m_finest = levels.front();
@@ -88,12 +86,11 @@ Vec3 ConeTracer::hitRadiance(const AxisHit& hit, const Vec3& d, const Vec3& apex
       // Cycles at some seeds; clamped at 0.25 v, within 0.85-1.18 at four seeds and the image 1%
       // darker, at 0.5 v 2% darker).
       L += directLightSample(m_scene, m_accel, hit.surface, -d, lightU, false, clamp);
-      // The sky by its photons where they were kept; elsewhere (the ground outside, seen through a
-      // window from beside it, where few gathers read) by a shadow ray: with its photons left out
-      // there, a ceiling above a window came out 10% dark (tools/make_gltf_room.py-like rooms).
-      const bool skyByRay =
-          m_hitSkyRays || (m_skyRegion && !m_skyRegion->contains(hit.surface.position, hit.side));
-      if (m_scene.environment && skyByRay) {
+      // The sky by its photons where the estimate keeps them (hit_sky: photons); elsewhere, and
+      // with hit_sky: rays, by a shadow ray. (Outside the region, the ground seen through a window
+      // from beside it where few gathers read, the ray is what is left: without it a ceiling
+      // above a window came out 10% dark, tools/make_gltf_room.py --held-out-2.)
+      if (m_hitEnvironment && !m_photons->settings().keepsSky(hit.surface.position, hit.side)) {
         // The sky's pair: the lamps' shifted by irrational steps (a Cranley-Patterson rotation),
         // so the two samples of one hit do not share their point.
         const Vec2 skyU(std::fmod(lightU.x + 0.61803399f, 1.0f), std::fmod(lightU.y + 0.41421356f, 1.0f));

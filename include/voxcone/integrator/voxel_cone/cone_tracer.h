@@ -9,7 +9,6 @@
 #include "voxcone/scene/scene.h"
 #include "voxcone/voxel/voxel_field.h"
 
-#include <memory>
 #include <optional>
 
 namespace voxcone {
@@ -18,7 +17,6 @@ class Accel;
 class Scene;
 class PhotonRadiance;
 class LightProximity;
-class SeenRegion;
 class VoxelField;
 struct VoxelConeSettings;
 
@@ -112,10 +110,7 @@ private:
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
   bool m_hitDirect;
-  bool m_hitSkyRays;  ///< the sky's light at a hit by a shadow ray (else its photons carry it)
-  /// With the sky's photons (hit_sky): the region they are kept in (PhotonRadianceSettings::keeps).
-  /// A hit outside it takes the sky's light by a shadow ray: its photons there were left out.
-  std::shared_ptr<const SeenRegion> m_skyRegion;
+  bool m_hitEnvironment;  ///< m_hitDirect under a sky: its light at a hit where its photons are not kept
   float m_v0 = 0.0f;  ///< finest voxel size
   int m_finest = 0, m_coarsest = 0;
   Bounds3 m_fieldBounds;
