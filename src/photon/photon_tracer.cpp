@@ -50,26 +50,27 @@ enum class Pass : uint64_t { Global = 0, Caustic = 1 };
 /// lights' flux, so that each pass carries it all.
 void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& lights, const PhotonSettings& settings,
                  Pass pass, uint64_t index, uint64_t count, const Sphere& aim, std::vector<Photon>& out,
-                 std::vector<uint32_t>* bins, std::vector<Photon>& glossyOut) {
+                 std::vector<EmissionSample>* samples, std::vector<Photon>& glossyOut) {
   // Stream (seed, p * 2^40 + i): 2^40 photons per pass before streams could overlap.
   Rng rng(settings.seed, (static_cast<uint64_t>(pass) << 40) + index);
 
   // Emission. The light choice is stratified over the pass, (index + u) / count: each light
-  // (and, guided, each bin of the guide) emits its share of the photons to within one, where
+  // (and, guided, each leaf of the guide) emits its share of the photons to within one, where
   // independent choices would leave a 16-light room's dimmest lights a few photons each, give
   // or take half. 32 random bits as a double (the CDF is double).
   EmittedPhoton e;
-  double uLight = std::min((double(index) + double(rng.nextU32()) * 0x1p-32) / double(count), std::nextafter(1.0, 0.0));
-  const float uSide = rng.uniform();
-  const Vec2 uPos = rng.uniform2();
-  Vec2 uDir = rng.uniform2();
+  EmissionSample u;
+  u.uLight = std::min((double(index) + double(rng.nextU32()) * 0x1p-32) / double(count), std::nextafter(1.0, 0.0));
+  u.uSide = rng.uniform();
+  u.uPos = rng.uniform2();
+  u.uDir = rng.uniform2();
   // The global pass through the emission guide: the same primary sample space, drawn by the
   // guide's density, each photon weighted by the uniform density over it.
   const EmissionGuide* guide = pass == Pass::Global ? settings.guide.get() : nullptr;
-  const double guideWeight = guide ? guide->remap(uLight, uDir) : 1.0;
-  const uint32_t bin = guide ? uint32_t(guide->binOf(uLight, uDir)) : 0;
+  const double guideWeight = guide ? guide->remap(u) : 1.0;
   const bool aimed = pass == Pass::Caustic && aim.radius >= 0.0f;
-  if (!(aimed ? lights.sampleToward(uLight, uSide, uPos, uDir, aim, e) : lights.sample(uLight, uSide, uPos, uDir, e)))
+  if (!(aimed ? lights.sampleToward(u.uLight, u.uSide, u.uPos, u.uDir, aim, e)
+              : lights.sample(u.uLight, u.uSide, u.uPos, u.uDir, e)))
     return;
   Vec3 power = Vec3(e.fluxWatts * (guideWeight / double(count)));
   if (!isFinite(power) || !(maxComponent(power) > 0.0f)) return;
@@ -109,7 +110,7 @@ void tracePhoton(const Scene& scene, const Accel& accel, const LightEmission& li
         ph.nearShare = nearShare;
         ph.fromEnvironment = e.environment ? 1 : 0;
         out.push_back(ph);
-        if (bins) bins->push_back(bin);
+        if (samples) samples->push_back(u);
       }
       // A caustic path ends at its first diffuse hit: nothing after it is L S+ D.
       if (pass == Pass::Caustic) return;
@@ -168,6 +169,17 @@ double lampPhotonShare(const Scene& scene) {
   return share;
 }
 
+std::vector<double> lightChoiceEdges(const Scene& scene) {
+  const LightEmission lights(scene);
+  std::vector<double> edges;
+  double c = 0.0;
+  for (size_t i = 0; i + 1 < lights.lightCount(); ++i) {
+    c += lights.pmf(i);
+    if (c > 0.0 && c < 1.0 && (edges.empty() || c > edges.back())) edges.push_back(c);
+  }
+  return edges;
+}
+
 PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSettings& settings, Progress* progress) {
   const auto t0 = std::chrono::steady_clock::now();
   Progress nullProgress;
@@ -197,8 +209,8 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
   // One parallel loop over the blocks of both passes; block b collects into perBlock[b], and
   // the blocks are concatenated in order, so the maps do not depend on the thread count.
   std::vector<std::vector<Photon>> perBlock(blocks[0] + blocks[1]), perBlockGlossy(blocks[0] + blocks[1]);
-  const bool record = settings.recordBins && settings.guide;
-  std::vector<std::vector<uint32_t>> perBlockBins(record ? blocks[0] : 0);
+  const bool record = settings.recordSamples;
+  std::vector<std::vector<EmissionSample>> perBlockSamples(record ? blocks[0] : 0);
   std::atomic<bool> cancelled{false};
   tbb::parallel_for(tbb::blocked_range<uint64_t>(0, perBlock.size(), 1), [&](const tbb::blocked_range<uint64_t>& r) {
     for (uint64_t b = r.begin(); b != r.end(); ++b) {
@@ -211,9 +223,9 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
       const uint64_t first = (b - (pass == Pass::Global ? 0 : blocks[0])) * kBlockSize;
       const uint64_t last = std::min(counts[p], first + kBlockSize);
       std::vector<Photon>& out = perBlock[b];
-      std::vector<uint32_t>* bins = record && pass == Pass::Global ? &perBlockBins[b] : nullptr;
+      std::vector<EmissionSample>* samples = record && pass == Pass::Global ? &perBlockSamples[b] : nullptr;
       for (uint64_t i = first; i < last; ++i)
-        tracePhoton(scene, accel, lights, settings, pass, i, counts[p], aim, out, bins, perBlockGlossy[b]);
+        tracePhoton(scene, accel, lights, settings, pass, i, counts[p], aim, out, samples, perBlockGlossy[b]);
       prog.advance(last - first);
     }
   });
@@ -231,8 +243,9 @@ PhotonMaps tracePhotons(const Scene& scene, const Accel& accel, const PhotonSett
     maps.glossyCaustic.insert(maps.glossyCaustic.end(), perBlockGlossy[b].begin(), perBlockGlossy[b].end());
   }
   if (record) {
-    maps.globalBins.reserve(sizes[0]);
-    for (std::vector<uint32_t>& bins : perBlockBins) maps.globalBins.insert(maps.globalBins.end(), bins.begin(), bins.end());
+    maps.globalSamples.reserve(sizes[0]);
+    for (const std::vector<EmissionSample>& samples : perBlockSamples)
+      maps.globalSamples.insert(maps.globalSamples.end(), samples.begin(), samples.end());
   }
   prog.finish();
 

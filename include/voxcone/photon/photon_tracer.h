@@ -8,6 +8,7 @@
 #include "voxcone/core/bounds.h"
 #include "voxcone/core/math.h"
 #include "voxcone/core/progress.h"
+#include "voxcone/photon/emission_guide.h"
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -19,7 +20,6 @@ namespace voxcone {
 
 class Scene;
 class Accel;
-class EmissionGuide;
 class LightProximity;
 
 /// A photon stored at a diffuse surface hit.
@@ -78,8 +78,8 @@ struct PhotonSettings {
   /// The global pass's emission through this guide (EmissionGuide: photons guided to what the
   /// camera sees, weighted so that the map stays unbiased); none: unguided.
   std::shared_ptr<const EmissionGuide> guide;
-  /// With a guide: PhotonMaps::globalBins names the guide's bin of each global photon's emission.
-  bool recordBins = false;
+  /// PhotonMaps::globalSamples names the emission (after the guide's remapping) of each global photon.
+  bool recordSamples = false;
   /// Where given, each global photon records the near share of the last diffuse surface it left
   /// (Photon::nearShare).
   std::shared_ptr<const LightProximity> proximity;
@@ -94,6 +94,10 @@ struct PhotonSettings {
 /// The share of a pass's photons that leave lamps (emissive triangles and point lights), not the
 /// sky or a sun: their share of the power the lights are chosen by.
 double lampPhotonShare(const Scene& scene);
+
+/// The values of a photon's uLight where the choice of one light ends and the next begins
+/// (EmissionGuide::fromUseful's light edges).
+std::vector<double> lightChoiceEdges(const Scene& scene);
 
 /// Statistics of one tracing run.
 struct PhotonStats {
@@ -115,8 +119,8 @@ struct PhotonMaps {
   /// dielectric) after specular bounces only, L S+ G: their first glossy hit, where the path
   /// ends (albedo 0: the glossy surface's BSDF weighs them where it is shaded).
   std::vector<Photon> glossyCaustic;
-  /// With PhotonSettings::recordBins: the emission guide's bin each global photon left in.
-  std::vector<uint32_t> globalBins;
+  /// With PhotonSettings::recordSamples: the primary sample each global photon was emitted from.
+  std::vector<EmissionSample> globalSamples;
   PhotonStats stats;
 };
 

@@ -26,8 +26,20 @@
 namespace voxcone {
 
 namespace {
-/// The pilot's useful photons per bin of the emission guide, at least (EmissionGuide::coarsen).
-constexpr double kGuidePerBin = 8.0;
+/// The emission guide's boxes are cut while they hold this many of the pilot's useful photons
+/// (EmissionGuide::fromUseful); fewer in all, and no guide is built.
+constexpr double kGuideSplit = 32.0;
+/// A guided photon weighs at most this many times a typical useful one (EmissionGuide's bound).
+/// Measured on tools/make_gltf_room.py's three rooms against Cycles (seeds 0-7, 32x32 blocks:
+/// the mean over blocks of each block's standard deviation across seeds; the seeds with a block
+/// beyond 10%; the photons emitted), room / --held-out / --held-out-2: unbounded, one block of
+/// --held-out-2 came out 1.21 (136k photons, the pilot's yield taken as the guide's); 8: 0.0165
+/// / 0.0167 / 0.0176, 2 / 2 / 0 seeds (1.30M / 1.91M / 2M photons); 16: 0.0161 / 0.0166 /
+/// 0.0185, 1 / 1 / 0 (728k / 1.05M / 1.25M). The grid guide before it: 0.0148 / 0.0162 /
+/// 0.0189, 0 / 1 / 2 (2M photons in each).
+constexpr double kGuideMaxRatio = 16.0;
+/// The useful photons a pilot is grown to where the first holds fewer.
+constexpr double kPilotUseful = 16384.0;
 /// The share of the gathers' points the distant lights' target sphere holds (SeenRegion::readSphere).
 /// Measured with distant_aim 0.5 on tools/make_gltf_room.py's room against Cycles (seeds 0-7,
 /// 32x32 blocks beyond 10%): 0.75 left 1 seed out (1.106), 0.9 none (worst 1.086), 1.0 two
@@ -49,6 +61,21 @@ Vec2 shiftedHammersley(size_t i, size_t n, const Vec2& shift) {
   Vec2 u((float(i) + 0.5f) / float(n) + shift.x, float(sobolDim0(uint32_t(i))) * 0x1p-32f + shift.y);
   u -= glm::floor(u);
   return glm::min(u, Vec2(kOneMinusEpsilon));
+}
+/// The pilot's photons of use (`stores`: the indices of their useful stores in maps.global, each
+/// photon's next to each other, with maps.globalSamples) as the emission guide's samples, each
+/// photon once with its number of useful stores.
+std::vector<EmissionGuide::Useful> usefulEmissions(const PhotonMaps& maps, const std::vector<size_t>& stores) {
+  std::vector<EmissionGuide::Useful> out;
+  for (size_t i : stores) {
+    // No two photons share a light choice (it is stratified over the pass).
+    const EmissionSample& u = maps.globalSamples[i];
+    if (!out.empty() && out.back().sample.uLight == u.uLight)
+      out.back().stores += 1.0;
+    else
+      out.push_back({u, 1.0});
+  }
+  return out;
 }
 }  // namespace
 
@@ -97,16 +124,8 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   }
   PhotonSettings pilot = m_settings.photons;
   const bool guided = m_settings.photonTarget > 0 && m_settings.guideFloor > 0.0 && m_settings.guideFloor < 1.0;
-  // The pilot names the bin of the finest guide's layout each photon left in (its photons are
-  // the unguided ones: the uniform guide remaps nothing): a slice of the light choice per light
-  // up to 8, and 16 x 16 direction cells.
-  int slices = 1;
-  while (slices < 8 && size_t(slices) * 2 <= m_scene.lightCount()) slices *= 2;
-  int dirRes = 16;
-  if (guided) {
-    pilot.guide = std::make_shared<EmissionGuide>(slices, dirRes);
-    pilot.recordBins = true;
-  }
+  // The pilot's photons are unguided; each names the primary sample it left from.
+  pilot.recordSamples = guided;
   PhotonMaps maps = tracePhotons(m_scene, m_accel, pilot, progress);
   if (m_settings.photonTarget == 0) return maps;
   // The cells the camera's gathers read: cubes of a 64th of the scene's bounding-sphere
@@ -128,37 +147,33 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
   // photons, and 32x32 blocks of its ceiling moved by up to 50% from photon seed to seed).
   PhotonRadianceSettings estimate = m_settings.hitEstimate;
   estimate.skyDirect = false;
-  std::vector<double> useful;
+  std::vector<size_t> usefulStores;
   uint64_t inSeen = 0;
   const auto countUseful = [&] {
-    useful.assign(guided ? size_t(pilot.guide->bins()) : 0, 0.0);
-    inSeen = 0;
+    usefulStores.clear();
     for (size_t i = 0; i < maps.global.size(); ++i) {
       const Photon& p = maps.global[i];
-      if (!estimate.keeps(p) || !seen.contains(p.position, p.normal)) continue;
-      ++inSeen;
-      if (guided) useful[maps.globalBins[i]] += 1.0;
+      if (estimate.keeps(p) && seen.contains(p.position, p.normal)) usefulStores.push_back(i);
     }
+    inSeen = usefulStores.size();
   };
   countUseful();
-  // A pilot too small to shape the finest guide, where the pass it would guide is far larger (a
-  // room lit through a window: 124 of 10k pilot photons of use, for a pass of 2M): once more,
-  // with enough photons for it, at most an eighth of the most allowed. sky-room then traced 89k
-  // + 669k photons for its target, 1.18M without (0.32 s to prepare against 0.43 s, the same
-  // error at three seeds); tools/make_gltf_room.py's room 251k + 1.68M, 1.9M without.
-  const double finestNeed = kGuidePerBin * double(pilot.guide ? pilot.guide->bins() : 0);
-  if (guided && double(inSeen) < finestNeed) {
+  // A pilot too small to shape a guide, where the pass it would guide is far larger (a room lit
+  // through a window: 124 of 10k pilot photons of use, for a pass of 2M): once more, with enough
+  // photons for kPilotUseful, at most an eighth of the most allowed. sky-room then traces 251k
+  // + 435k photons for its target, tools/make_gltf_room.py's room 251k + 709k (the grid guide
+  // before the tree: 96k + 445k and 251k + 1.68M).
+  if (guided && double(inSeen) < kPilotUseful) {
     const double perPhoton =
         double(std::max<uint64_t>(inSeen, 1)) / double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
     const double mainPass = std::min(double(m_settings.maxPhotons), double(m_settings.photonTarget) / perPhoton);
-    const double bigger = std::min({finestNeed / perPhoton, double(m_settings.maxPhotons) / 8.0, mainPass / 8.0});
+    const double bigger = std::min({kPilotUseful / perPhoton, double(m_settings.maxPhotons) / 8.0, mainPass / 8.0});
     if (bigger > 2.0 * double(maps.stats.emittedGlobal)) {
       pilot.photons = (uint64_t(std::ceil(bigger)) + 1023) / 1024 * 1024;
       maps = tracePhotons(m_scene, m_accel, pilot, progress);
       countUseful();
     }
   }
-  std::vector<uint32_t>().swap(maps.globalBins);
   m_stats["seen_cells"] = seen.cells();
   m_stats["pilot_photons"] = {{"emitted", maps.stats.emittedGlobal}, {"stored", maps.global.size()}, {"seen", inSeen}};
   if (inSeen < m_settings.photonTarget) {
@@ -167,19 +182,20 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
     const double emitted = double(std::max<uint64_t>(maps.stats.emittedGlobal, 1));
     double share = double(inSeen) / emitted;
     PhotonSettings more = m_settings.photons;
-    // Guided by the pilot where that is worth it: the layout its counts support (8 useful
-    // photons per bin at least), and the effective number of useful photons per photon (their
-    // weights differ) at least a quarter above the unguided share. The count is then the one
-    // the guide's own share of useful photons asks for (the target counts photons; from the
-    // effective share the sky-room stored 755k for a target of 200k).
-    if (guided && EmissionGuide::coarsen(double(inSeen), kGuidePerBin, slices, dirRes)) {
-      const std::vector<double> coarse =
-          EmissionGuide::aggregate(useful, pilot.guide->slices(), pilot.guide->dirRes(), slices, dirRes);
-      auto guide = std::make_shared<EmissionGuide>(EmissionGuide::fromUseful(slices, dirRes, coarse, m_settings.guideFloor));
+    // Guided by the pilot where that is worth it: the effective number of useful photons per
+    // photon (their weights differ) at least a quarter above the unguided share. The count is
+    // then the one the guide's own share of useful photons asks for (the target counts photons;
+    // from the effective share the sky-room stored 755k for a target of 200k).
+    const std::vector<EmissionGuide::Useful> useful =
+        guided ? usefulEmissions(maps, usefulStores) : std::vector<EmissionGuide::Useful>();
+    if (guided && double(useful.size()) >= kGuideSplit) {
+      const std::vector<double> edges = lightChoiceEdges(m_scene);
+      auto guide = std::make_shared<EmissionGuide>(
+          EmissionGuide::fromUseful(useful, edges, m_settings.guideFloor, kGuideSplit, kGuideMaxRatio));
       double usefulPer = 0.0, effectivePer = 0.0;
-      guide->expectedYield(coarse, emitted, usefulPer, effectivePer);
-      m_stats["photon_guide"] = {{"slices", slices},
-                                 {"dir_res", dirRes},
+      EmissionGuide::heldOutYield(useful, edges, m_settings.guideFloor, kGuideSplit, kGuideMaxRatio, emitted, usefulPer,
+                                  effectivePer);
+      m_stats["photon_guide"] = {{"leaves", guide->leaves()},
                                  {"unguided_share", share},
                                  {"expected_share", usefulPer},
                                  {"expected_effective_share", effectivePer}};
@@ -196,6 +212,7 @@ PhotonMaps VoxelConeIntegrator::tracePhotonsForView(Progress* progress) {
       inSeen = seen.count(maps.global, estimate);
     }
   }
+  std::vector<EmissionSample>().swap(maps.globalSamples);
   m_stats["seen_photons"] = inSeen;
   m_stats["seen_seconds"] = t.seconds();
   return maps;
@@ -216,7 +233,7 @@ void VoxelConeIntegrator::addLampPass(std::vector<Photon>& near, uint64_t emitte
   lamps.photons = std::min<uint64_t>(m_settings.maxPhotons, uint64_t(std::ceil(wanted - fromMain) + 1023) / 1024 * 1024);
   lamps.causticPhotons = 0;
   lamps.guide.reset();
-  lamps.recordBins = false;
+  lamps.recordSamples = false;
   lamps.localOnly = true;
   lamps.seed = mixBits(m_settings.photons.seed ^ 0x6c616d7073ULL);
   const PhotonMaps more = tracePhotons(m_scene, m_accel, lamps, progress);

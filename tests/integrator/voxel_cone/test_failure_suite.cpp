@@ -57,9 +57,10 @@ TEST(FailureSuite, AHallLitThroughARoofOpeningMatchesPathInEveryCell) {
 
 TEST(FailureSuite, TheHallsPhotonsAreGuidedThroughTheRoofOpening) {
   // Under the hall's sun most photons land on the roof, where the camera never looks (the pilot:
-  // 972 of 10,000 bounced photons in the seen cells). Unguided, the photon target needs the 2M
-  // cap; guided by the pilot it needs about a third of that (measured 664k) for as many photons
-  // where the camera looks. The image is held to path cell by cell by the test above.
+  // 917 of 10,000 bounced photons in the seen cells). Unguided, the photon target needs the 2M
+  // cap; guided by the pilot (grown to 179k photons) it needs about a fifth of that (measured
+  // 393k) for as many photons where the camera looks. The image is held to path cell by cell by
+  // the test above.
   const Scene hall = failureScene("sunlit-hall");
   const Hbvh accel(hall);
   nlohmann::json stats[2];
@@ -74,9 +75,9 @@ TEST(FailureSuite, TheHallsPhotonsAreGuidedThroughTheRoofOpening) {
   const double emitted[2] = {stats[0]["emitted_global"].get<double>(), stats[1]["emitted_global"].get<double>()};
   EXPECT_LT(emitted[1], 0.5 * emitted[0]);
   // The target (200k, asked for with 5% to spare) reached within 15% both ways: the guide's
-  // expected share holds. Measured: 204.8k unguided; guided 234.6k, the pilot's expected share
-  // 0.305 (from its 972 useful photons) against 0.335 achieved (within a tenth before the
-  // photons' light choice was stratified).
+  // expected share holds. Measured: 202k unguided; guided 230k, the expected share judged on
+  // pilot photons the guide was not built on 0.535 against 0.585 achieved (judged on those it
+  // was built on, the tree's promise was 16% too high: 176k).
   for (const nlohmann::json& s : stats) EXPECT_NEAR(s["seen_photons"].get<double>(), 210000.0, 31500.0);
 }
 
