@@ -9,12 +9,13 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/render_helpers.h"
+#include "../support/report.h"
 #include "../support/temp_dir.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <functional>
 #include <string>
 
@@ -22,6 +23,7 @@ namespace voxcone {
 namespace {
 
 using test::renderWith;
+using test::report;
 
 /// A 40 x 40 plane at y = 0 seen from 1.5 above at 50 degrees down, so that cos theta at the
 /// plane runs from about 0.45 to 0.95 across the image; a constant white sky.
@@ -60,7 +62,7 @@ void expectBlocks(const Image& img, const std::vector<double>& want, double tol,
   ASSERT_EQ(got.size(), want.size());
   double worst = 0.0;
   for (size_t b = 0; b < got.size(); ++b) worst = std::max(worst, std::fabs(got[b] / want[b] - 1.0));
-  std::printf("%s: worst 8x8 block %.4f off the closed form (bound %.2f)\n", what.c_str(), worst, tol);
+  report(what + " worst 8x8 block |ratio - 1|", worst, tol);
   for (size_t b = 0; b < got.size(); ++b)
     EXPECT_NEAR(got[b], want[b], tol * want[b]) << what << " block " << b << " (of " << got.size() << ")";
 }
@@ -139,6 +141,7 @@ TEST_F(CoatedFiles, WritersKeepTheNewMaterials) {
                                  "coated", ".");
   writeJsonScene(scene, path("a.json"));
   writeMitsubaScene(scene, path("a.xml"));
+  float iorOff = 0.0f, colourOff = 0.0f;
   for (const Scene& back : {loadScene(path("a.json")), loadScene(path("a.xml"))}) {
     ASSERT_EQ(back.triangles.size(), scene.triangles.size());
     for (size_t t = 0; t < scene.triangles.size(); t += 2) {
@@ -147,11 +150,13 @@ TEST_F(CoatedFiles, WritersKeepTheNewMaterials) {
       EXPECT_EQ(a.type, b.type) << a.name;
       if (a.isEmissive()) continue;
       EXPECT_NEAR(a.ior, b.ior, 1e-5f) << a.name;
+      iorOff = std::max(iorOff, std::fabs(a.ior - b.ior));
       EXPECT_EQ(a.coatNonlinear, b.coatNonlinear) << a.name;
       EXPECT_EQ(a.twoSided, b.twoSided) << a.name;
       for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(a.albedo[c], b.albedo[c], 1e-6f) << a.name;
         EXPECT_NEAR(a.specular[c], b.specular[c], 1e-6f) << a.name;
+        colourOff = std::max({colourOff, std::fabs(a.albedo[c] - b.albedo[c]), std::fabs(a.specular[c] - b.specular[c])});
       }
       if (a.type == MaterialType::RoughPlastic) {
         EXPECT_FLOAT_EQ(a.roughness, b.roughness);
@@ -161,6 +166,8 @@ TEST_F(CoatedFiles, WritersKeepTheNewMaterials) {
       EXPECT_FLOAT_EQ(a.coat.internalReflectance, b.coat.internalReflectance) << a.name;
     }
   }
+  report("worst ior error", iorOff, 1e-5);
+  report("worst albedo or specular error", colourOff, 1e-6);
 }
 
 }  // namespace

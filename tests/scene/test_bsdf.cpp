@@ -7,6 +7,8 @@
 #include "voxcone/core/sampling.h"
 #include "voxcone/scene/bsdf.h"
 
+#include "../support/report.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -757,6 +759,9 @@ TEST(BsdfCoated, DiffuseFresnelReflectancesMatchTheirIntegrals) {
   // and 0.5963457. They satisfy 1 - Fdr_ext = n^2 (1 - Fdr_int) (the diffuse transmittances'
   // reciprocity), which makes a white coated base conserve energy below.
   const Material m = plastic(MaterialType::Plastic);
+  test::report("Fdr_ext error", std::fabs(m.coat.externalAlbedo - 0.0917780f), 2e-5);
+  test::report("Fdr_int error", std::fabs(m.coat.internalReflectance - 0.5963457f), 2e-5);
+  test::report("T(1) error", std::fabs(m.coat.transmittance[CoatTable::kSize - 1] - 0.96f), 1e-5);
   EXPECT_NEAR(m.coat.externalAlbedo, 0.0917780f, 2e-5f);
   EXPECT_NEAR(m.coat.internalReflectance, 0.5963457f, 2e-5f);
   EXPECT_NEAR(m.coat.transmittance[CoatTable::kSize - 1], 0.96f, 1e-5f);  // 1 - ((n-1)/(n+1))^2
@@ -772,15 +777,19 @@ TEST(BsdfCoated, SmoothPlasticWhiteFurnaceAndClosedForm) {
   // A white base with Mitsuba's nonlinear sum: every bounce inside returns all the light, so the
   // coat's reflection F plus the base's (1 - F) make exactly 1 at every angle.
   const Material white = plastic(MaterialType::Plastic, 0.1f, MicrofacetDistribution::GGX, Vec3(1.0f), true);
+  float furnaceOff = 0.0f;
   for (float c : {0.95f, 0.5f, 0.1f, -0.7f}) {
     float share;
     const Vec3 a = meanWeightWithDelta(white, woAt(c), 200000, share);
     for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(a[ch], 1.0f, 0.01f) << "cos " << c;
+    for (int ch = 0; ch < 3; ++ch) furnaceOff = std::max(furnaceOff, std::fabs(a[ch] - 1.0f));
   }
+  test::report("white furnace worst |albedo - 1|", furnaceOff, 0.01);
   // Linear (the default), albedo 0.6 grey: F(mu) + (1 - F(mu)) 0.6 (1 - Fdr_ext) / (n^2 (1 - Fdr_int))
   // = F + (1 - F) 0.6 with the reciprocity above; the delta lobe sampled with probability
   // F s / (F s + (1 - F)(1 - s)), s = 1 / (1 + 0.6).
   const Material grey = plastic(MaterialType::Plastic, 0.1f, MicrofacetDistribution::GGX, Vec3(0.6f));
+  float greyOff = 0.0f, shareOff = 0.0f;
   for (float c : {0.9f, 0.3f}) {
     const float f = fresnelDielectric(c, 1.5f);
     float share;
@@ -788,7 +797,11 @@ TEST(BsdfCoated, SmoothPlasticWhiteFurnaceAndClosedForm) {
     EXPECT_NEAR(a.x, f + (1.0f - f) * 0.6f, 0.01f) << "cos " << c;
     const float s = 1.0f / 1.6f;
     EXPECT_NEAR(share, f * s / (f * s + (1.0f - f) * (1.0f - s)), 0.005f) << "cos " << c;
+    greyOff = std::max(greyOff, std::fabs(a.x - (f + (1.0f - f) * 0.6f)));
+    shareOff = std::max(shareOff, std::fabs(share - f * s / (f * s + (1.0f - f) * (1.0f - s))));
   }
+  test::report("grey albedo worst error", greyOff, 0.01);
+  test::report("delta share worst error", shareOff, 0.005);
   // The delta lobe, as Whitted-style splitting lists it: F, in the mirror direction.
   DeltaLobe lobes[2];
   ASSERT_EQ(bsdfDeltaLobes(grey, woAt(0.5f), lobes), 1);
@@ -805,6 +818,7 @@ TEST(BsdfCoated, RoughCoatTransmittanceMatchesItsLobe) {
   // The table's 1 - T(mu) is the coat's directional albedo: here integrated from bsdfEval of the
   // coat alone (albedo 0) by uniform hemisphere sampling, independent of the table's
   // visible-normal quadrature.
+  double worst = 0.0;
   for (const auto d : {MicrofacetDistribution::GGX, MicrofacetDistribution::Beckmann}) {
     const Material m = plastic(MaterialType::RoughPlastic, 0.3f, d, Vec3(0.0f));
     for (float c : {0.9f, 0.5f, 0.2f}) {
@@ -819,8 +833,10 @@ TEST(BsdfCoated, RoughCoatTransmittanceMatchesItsLobe) {
       const int i = int(x);
       const float t = (1.0f - (x - float(i))) * m.coat.transmittance[i] + (x - float(i)) * m.coat.transmittance[i + 1];
       EXPECT_NEAR(sum / n, 1.0 - t, 0.004) << "cos " << c;
+      worst = std::max(worst, std::fabs(sum / n - (1.0 - t)));
     }
   }
+  test::report("worst |integrated albedo - (1 - T)|", worst, 0.004);
 }
 
 TEST(BsdfCoated, RoughPlasticSumsItsBaseAsMitsubaDoes) {
@@ -830,10 +846,12 @@ TEST(BsdfCoated, RoughPlasticSumsItsBaseAsMitsubaDoes) {
   // returns (1 - Fdr_ext) / (n^2 (1 - Fdr_int)) of what enters, 1 for a smooth coat, less for a
   // rough one (0.73 at alpha 0.3). The sampled albedo must equal that sum, and tend to the
   // smooth coat's 1 as alpha -> 0.
+  float sumOff = 0.0f, smoothOff = 0.0f;
   for (const float alpha : {0.01f, 0.3f}) {
     const Material m = plastic(MaterialType::RoughPlastic, alpha, MicrofacetDistribution::GGX, Vec3(1.0f), true);
     const float returned =
         (1.0f - m.coat.externalAlbedo) / (2.25f * (1.0f - m.coat.internalReflectance));
+    if (alpha < 0.05f) test::report("alpha 0.01 returned share - 1", std::fabs(returned - 1.0f), 0.002);
     if (alpha < 0.05f) EXPECT_NEAR(returned, 1.0f, 0.002f);
     for (float c : {0.9f, 0.5f, 0.2f}) {
       float share;
@@ -844,14 +862,19 @@ TEST(BsdfCoated, RoughPlasticSumsItsBaseAsMitsubaDoes) {
       EXPECT_EQ(share, 0.0f);
       EXPECT_NEAR(a.x, (1.0f - t) + t * returned, 0.012f) << "alpha " << alpha << " cos " << c;
       if (alpha < 0.05f) EXPECT_NEAR(a.x, 1.0f, 0.015f) << "cos " << c;
+      sumOff = std::max(sumOff, std::fabs(a.x - ((1.0f - t) + t * returned)));
+      if (alpha < 0.05f) smoothOff = std::max(smoothOff, std::fabs(a.x - 1.0f));
     }
   }
+  test::report("sampled albedo worst error against the sum", sumOff, 0.012);
+  test::report("alpha 0.01 sampled albedo worst |a - 1|", smoothOff, 0.015);
 }
 
 TEST(BsdfThinDielectric, InterreflectionSumAndStraightTransmission) {
   Material m;
   m.type = MaterialType::ThinDielectric;
   m.ior = 1.5f;
+  float lobeOff = 0.0f, weightOff = 0.0f;
   for (float c : {1.0f, 0.6f, -0.3f}) {
     const Vec3 wo = c == 1.0f ? Vec3(0, 0, 1) : woAt(c);
     const float r = fresnelDielectric(std::fabs(wo.z), 1.5f);
@@ -859,12 +882,17 @@ TEST(BsdfThinDielectric, InterreflectionSumAndStraightTransmission) {
     ASSERT_EQ(bsdfDeltaLobes(m, wo, lobes), 2);
     EXPECT_NEAR(lobes[0].weight.x, 2.0f * r / (1.0f + r), 1e-6f);
     EXPECT_NEAR(lobes[0].weight.x + lobes[1].weight.x, 1.0f, 1e-6f);
+    lobeOff = std::max({lobeOff, std::fabs(lobes[0].weight.x - 2.0f * r / (1.0f + r)),
+                        std::fabs(lobes[0].weight.x + lobes[1].weight.x - 1.0f)});
     EXPECT_NEAR(glm::length(lobes[1].wi + wo), 0.0f, 1e-6f);  // straight through, no refraction
     float share;
     const Vec3 a = meanWeightWithDelta(m, wo, 100000, share);
     EXPECT_NEAR(a.x, 1.0f, 1e-5f);
     EXPECT_EQ(share, 1.0f);
+    weightOff = std::max(weightOff, std::fabs(a.x - 1.0f));
   }
+  test::report("worst lobe weight error", lobeOff, 1e-6);
+  test::report("worst |mean sample weight - 1|", weightOff, 1e-5);
   // At normal incidence: 2 (0.04) / 1.04.
   DeltaLobe lobes[2];
   bsdfDeltaLobes(m, Vec3(0, 0, 1), lobes);

@@ -10,12 +10,13 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/render_helpers.h"
+#include "../support/report.h"
 #include "../support/test_scenes.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <unistd.h>
@@ -25,6 +26,7 @@ namespace {
 
 using test::imageMean;
 using test::renderWith;
+using test::report;
 constexpr auto vec = test::jsonVec;
 
 
@@ -56,10 +58,22 @@ TEST(DirectionalLight, AFloorReflectsAlbedoOverPiTimesECosInEveryMethod) {
   ASSERT_EQ(scene.directionalLights.size(), 1u);
   ASSERT_EQ(scene.lightCount(), 1u);
   const Vec3 expected = 0.5f / kPi * Vec3(2.0f, 1.0f, 0.5f) * 0.5f;
+  // Relative to the expected radiance: the channel nearest its bound, over the methods.
+  double worst = -1.0, worstBound = 1.0;
+  std::string worstAt;
   for (const char* method : {"path", "whitted", "voxcone", "pm"}) {
     const Vec3 mean = imageMean(renderWith(scene, method, scene.render).image);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], expected[c], 1e-4f * expected[c] + 1e-6f) << method << " " << c;
+    for (int c = 0; c < 3; ++c) {
+      const double off = std::fabs(mean[c] - expected[c]) / expected[c], bound = (1e-4f * expected[c] + 1e-6f) / expected[c];
+      if (off / bound > worst / worstBound) {
+        worst = off;
+        worstBound = bound;
+        worstAt = std::string(method) + " channel " + std::to_string(c);
+      }
+    }
   }
+  report("relative error nearest its bound (" + worstAt + ")", worst, worstBound);
 }
 
 TEST(DirectionalLight, AFiniteSunGivesTheSameIrradianceByLightAndByBsdfSampling) {
@@ -72,17 +86,30 @@ TEST(DirectionalLight, AFiniteSunGivesTheSameIrradianceByLightAndByBsdfSampling)
   const Scene scene = sunScene(Vec3(0.0f), false, R"(, "angle_deg": 20)");
   ASSERT_FALSE(scene.directionalLights[0].isDelta());
   const Vec3 expected = 0.5f / kPi * Vec3(2.0f, 1.0f, 0.5f) * 0.5f;
+  double worst = -1.0;
+  std::string worstAt;
   for (const char* method : {"path", "whitted", "voxcone", "pm"}) {
     const Vec3 mean = imageMean(renderWith(scene, method, scene.render).image);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], expected[c], 0.01f * expected[c]) << method << " " << c;
+    for (int c = 0; c < 3; ++c)
+      if (std::fabs(mean[c] / expected[c] - 1.0f) > worst) {  // the first channel, then any worse
+        worst = std::fabs(mean[c] / expected[c] - 1.0f);
+        worstAt = std::string(method) + " channel " + std::to_string(c);
+      }
   }
+  report("light sampling relative error (" + worstAt + ")", worst, 0.01);
   RenderSettings s = scene.render;
   s.spp = 1024;
   const Vec3 bsdf = imageMean(renderWith(scene, "path", s, {{"light_sampling", "none"}}).image);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(bsdf[c], expected[c], 0.06f * expected[c]) << "BSDF sampling " << c;
+  double bsdfOff = 0.0;
+  for (int c = 0; c < 3; ++c) bsdfOff = std::max(bsdfOff, double(std::fabs(bsdf[c] / expected[c] - 1.0f)));
+  report("BSDF sampling relative error, worst channel", bsdfOff, 0.06);
   // A camera ray towards the sun sees its radiance; JSON keeps the angle, Mitsuba refuses it.
   const Vec3 towards = -scene.directionalLights[0].direction;
   const Vec3 L = scene.escaped(towards);
+  const double sunL = 2.0f / (kPi * sqr(std::sin(glm::radians(10.0f))));
+  report("sun's radiance relative error", std::fabs(L.x - sunL) / L.x, 1e-3);
   EXPECT_NEAR(L.x, 2.0f / (kPi * sqr(std::sin(glm::radians(10.0f)))), 1e-3f * L.x);
   EXPECT_EQ(scene.escaped(glm::normalize(towards + Vec3(0.0f, 0.3f, 0.0f))), Vec3(0.0f));  // 17 degrees off
 }
@@ -97,6 +124,9 @@ TEST(DirectionalLight, ARoofHidesTheFloorAndMovingTheSceneChangesNothing) {
   const Scene moved = sunScene(Vec3(-612.0f, 275.0f, 903.0f));
   const Vec3 mean = imageMean(renderWith(moved, "path", moved.render).image);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(mean[c], expected[c], 1e-3f * expected[c]) << c;
+  double off = 0.0;
+  for (int c = 0; c < 3; ++c) off = std::max(off, double(std::fabs(mean[c] / expected[c] - 1.0f)));
+  report("moved scene relative error, worst channel", off, 1e-3);
 }
 
 TEST(DirectionalLight, PhotonsCarryECosTimesTheFloorsArea) {
@@ -112,11 +142,17 @@ TEST(DirectionalLight, PhotonsCarryECosTimesTheFloorsArea) {
   const double r = scene.boundingSphere().radius;
   const double p = 16.0 * 0.5 / (kPi * r * r);
   const double n = double(s.photons);
+  report("floor's power - 16 W", std::fabs(red - 16.0), 5.0 * 16.0 * std::sqrt((1.0 - p) / (n * p)));
+  report("emitted power relative error", std::fabs(maps.stats.emittedPower.x / (2.0 * kPi * r * r) - 1.0), 1e-3);
   EXPECT_NEAR(red, 16.0, 5.0 * 16.0 * std::sqrt((1.0 - p) / (n * p)));
   EXPECT_NEAR(maps.stats.emittedPower.x, 2.0 * kPi * r * r, 1e-3 * 2.0 * kPi * r * r);
   // Each photon arrives from the sun.
-  for (size_t i = 0; i < maps.global.size(); i += 101)
+  float worst = 0.0f;
+  for (size_t i = 0; i < maps.global.size(); i += 101) {
     EXPECT_NEAR(glm::dot(maps.global[i].incident, Vec3(-0.8660254f, 0.5f, 0.0f)), 1.0f, 1e-5f);
+    worst = std::max(worst, std::fabs(glm::dot(maps.global[i].incident, Vec3(-0.8660254f, 0.5f, 0.0f)) - 1.0f));
+  }
+  report("worst 1 - cos(incident, sun)", worst, 1e-5);
 }
 
 TEST(DirectionalLight, PhotonsAimedAtWhatTheCameraReadsCarryTheSameFlux) {
@@ -146,11 +182,13 @@ TEST(DirectionalLight, PhotonsAimedAtWhatTheCameraReadsCarryTheSameFlux) {
   }
   for (const Photon& p : blind.global) blindIn += inTube(p.position) ? 1 : 0;
   const double n = double(s.photons), sigma = std::sqrt(std::max(redSq - red * red / n, 0.0));
-  std::printf("floor %.4f W (16 +/- %.4f), the target's tube %.3f of the photons (blind %.4f)\n", red, 5.0 * sigma,
-              double(aimedIn) / n, double(blindIn) / n);
+  report("floor's power - 16 W", std::fabs(red - 16.0), 5.0 * sigma);
+  report("sigma", sigma, 0.2);
   EXPECT_NEAR(red, 16.0, 5.0 * sigma);
   EXPECT_LT(sigma, 0.2);
   const double r = scene.boundingSphere().radius, tubeShare = 0.25 / (r * r);
+  report("aimed photons' share in the tube (lower bound)", double(aimedIn) / n, 0.9 * (0.75 + 0.25 * tubeShare));
+  report("blind photons' share in the tube", double(blindIn) / n, 1.2 * tubeShare);
   EXPECT_GT(double(aimedIn), 0.9 * (0.75 + 0.25 * tubeShare) * n);
   EXPECT_LT(double(blindIn), 1.2 * tubeShare * n);
   // A target as large as the scene's sphere changes nothing.
@@ -201,12 +239,14 @@ TEST(DirectionalLight, MitsubaDirectionalEmitter) {
   const Scene a = parseMitsubaScene(head + R"(<emitter type="directional"><vector name="direction" value="0, -2, 0"/>
     <rgb name="irradiance" value="3, 2, 1"/></emitter></scene>)", "a.xml", ".");
   ASSERT_EQ(a.directionalLights.size(), 1u);
+  report("direction.y + 1", std::fabs(a.directionalLights[0].direction.y + 1.0f), 1e-6);
   EXPECT_NEAR(a.directionalLights[0].direction.y, -1.0f, 1e-6f);
   EXPECT_EQ(a.directionalLights[0].irradiance, Vec3(3.0f, 2.0f, 1.0f));
   // to_world turns +z: 90 degrees about x sends it to -y.
   const Scene b = parseMitsubaScene(head + R"(<emitter type="directional"><transform name="to_world">
     <rotate x="1" angle="90"/></transform></emitter></scene>)", "b.xml", ".");
   ASSERT_EQ(b.directionalLights.size(), 1u);
+  report("turned direction.y + 1", std::fabs(b.directionalLights[0].direction.y + 1.0f), 1e-5);
   EXPECT_NEAR(b.directionalLights[0].direction.y, -1.0f, 1e-5f);
   EXPECT_EQ(b.directionalLights[0].irradiance, Vec3(1.0f));
   EXPECT_THROW(parseMitsubaScene(head + R"(<emitter type="directional"><vector name="direction" value="0, 0, 0"/>
@@ -223,13 +263,17 @@ TEST(DirectionalLight, ConvertWritesItBothWays) {
   const Scene xml = loadScene((dir / "sun.xml").string());
   writeJsonScene(xml, (dir / "sun.json").string());
   const Scene back = loadScene((dir / "sun.json").string());
+  float worst = 0.0f;
   for (const Scene* s : {&xml, &back}) {
     ASSERT_EQ(s->directionalLights.size(), 1u);
     for (int c = 0; c < 3; ++c) {
       EXPECT_NEAR(s->directionalLights[0].direction[c], scene.directionalLights[0].direction[c], 1e-6f);
       EXPECT_NEAR(s->directionalLights[0].irradiance[c], scene.directionalLights[0].irradiance[c], 1e-6f);
+      worst = std::max({worst, std::fabs(s->directionalLights[0].direction[c] - scene.directionalLights[0].direction[c]),
+                        std::fabs(s->directionalLights[0].irradiance[c] - scene.directionalLights[0].irradiance[c])});
     }
   }
+  report("worst direction or irradiance error", worst, 1e-6);
   std::filesystem::remove_all(dir);
 }
 

@@ -12,12 +12,14 @@
 #include "voxcone/scene/scene.h"
 
 #include "../support/render_helpers.h"
+#include "../support/report.h"
 #include "../support/temp_dir.h"
 
 #include <nlohmann/json.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -29,6 +31,7 @@ namespace {
 
 using nlohmann::json;
 using test::renderWith;
+using test::report;
 
 std::string base64(const std::string& bytes) {
   static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -186,9 +189,15 @@ TEST_F(Gltf, CornellBoxRendersAsTheJsonScene) {
     // The same triangles (in another order), camera and materials: the same image up to the
     // light samples' order over the triangles (seen: relMSE 2e-4 at 64 spp, cells within 1%).
     const Image img = renderWith(g, "path", s).image;
-    EXPECT_LT(compareImages(img, ref).relMse, 5e-3) << file;
-    for (const RegionError& e : regionErrors(img, ref, 4))
+    const double relMse = compareImages(img, ref).relMse;
+    report(std::string(file) + " relMSE", relMse, 5e-3);
+    EXPECT_LT(relMse, 5e-3) << file;
+    double worst = 0.0;
+    for (const RegionError& e : regionErrors(img, ref, 4)) {
       EXPECT_NEAR(e.meanTest.y / e.meanReference.y, 1.0, 0.05) << file;
+      worst = std::max(worst, std::fabs(e.meanTest.y / e.meanReference.y - 1.0));
+    }
+    report(std::string(file) + " worst cell |ratio - 1|", worst, 0.05);
   }
 }
 
@@ -211,6 +220,10 @@ TEST_F(Gltf, NodeTransformsPlaceTheTriangles) {
   ASSERT_EQ(s.triangleCount(), 3u);
   const auto vertex = [&](size_t t, int k) { return s.positions[s.triangles[t][k]]; };
   // (1, 0, 0) scaled 2 -> (2, 0, 0), turned -> (0, 2, 0), moved -> (5, 2, 0).
+  report("worst vertex or camera position error",
+         std::max({glm::length(vertex(0, 1) - Vec3(5, 2, 0)), glm::length(vertex(1, 0) - Vec3(5, 0, 2)),
+                   glm::length(s.camera.position() - Vec3(0, 0, 10))}),
+         1e-5);
   EXPECT_NEAR(glm::length(vertex(0, 1) - Vec3(5, 2, 0)), 0.0f, 1e-5f);
   // The child: (0, 0, 1) in the parent's frame is (0, 0, 2) in the world, plus (5, 0, 0).
   EXPECT_NEAR(glm::length(vertex(1, 0) - Vec3(5, 0, 2)), 0.0f, 1e-5f);
@@ -256,8 +269,11 @@ TEST_F(Gltf, ATexturedQuadShowsItsTexelsWhereTheJsonQuadDoes) {
   ASSERT_EQ(g.textures.size(), 2u);  // the JSON material's tex.png and the glTF's image
   const Image a = renderWith(g, "whitted", g.render).image;
   const Image c = renderWith(j, "whitted", j.render).image;
-  EXPECT_LT(compareImages(a, c).relMse, 1e-3);
+  const double relMse = compareImages(a, c).relMse;
+  report("glTF vs JSON relMSE", relMse, 1e-3);
+  EXPECT_LT(relMse, 1e-3);
   // Pixel (4, 4) sees the top-left texel's centre (uv 0.28, 0.72 in voxcone's frame): red.
+  report("pixel (4, 4) red / green (lower bound)", a.at(4, 4).x / a.at(4, 4).y, 3.0);
   EXPECT_GT(a.at(4, 4).x, 3.0f * a.at(4, 4).y);
 }
 
@@ -282,6 +298,12 @@ TEST_F(Gltf, LightsConvertAsBlendersImporter) {
   ASSERT_EQ(s.pointLights.size(), 1u);
   ASSERT_EQ(s.directionalLights.size(), 1u);
   // 683 cd = 1 W/sr (Blender: 4 pi W of point power), coloured; 1366 lx = 2 W/m^2.
+  report("worst light intensity, position, irradiance or direction error",
+         std::max({glm::length(s.pointLights[0].intensity - Vec3(1.0f, 0.5f, 0.25f)),
+                   glm::length(s.pointLights[0].position - Vec3(0, 2, 0)),
+                   glm::length(s.directionalLights[0].irradiance - Vec3(2.0f)),
+                   glm::length(s.directionalLights[0].direction - Vec3(0, -1, 0))}),
+         1e-5);
   EXPECT_NEAR(glm::length(s.pointLights[0].intensity - Vec3(1.0f, 0.5f, 0.25f)), 0.0f, 1e-5f);
   EXPECT_NEAR(glm::length(s.pointLights[0].position - Vec3(0, 2, 0)), 0.0f, 1e-5f);
   EXPECT_NEAR(glm::length(s.directionalLights[0].irradiance - Vec3(2.0f)), 0.0f, 1e-5f);
@@ -323,6 +345,11 @@ TEST_F(Gltf, MaterialsMapAndWarnWhatTheyDrop) {
   EXPECT_GE(matOf(2).coat.internalReflectance, 0.0f);  // prepared by the loader's finalize
   EXPECT_EQ(matOf(3).type, MaterialType::RoughDielectric);
   EXPECT_NEAR(matOf(3).ior, 1.33f, 1e-6f);
+  report("worst mapped parameter error",
+         std::max({std::fabs(matOf(0).albedo.x - 0.5f), std::fabs(matOf(1).roughness - 0.25f),
+                   std::fabs(matOf(1).specular.y - 0.4f), std::fabs(matOf(2).roughness - 0.09f),
+                   std::fabs(matOf(2).ior - 1.5f), std::fabs(matOf(2).albedo.z - 0.3f), std::fabs(matOf(3).ior - 1.33f)}),
+         1e-6);
   std::string all;
   for (const std::string& w : warnings) all += w + "\n";
   EXPECT_EQ(all.find("specular layer"), std::string::npos) << all;

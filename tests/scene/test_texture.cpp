@@ -12,10 +12,12 @@
 #include "voxcone/scene/texture.h"
 
 #include "../support/render_helpers.h"
+#include "../support/report.h"
 #include "../support/temp_dir.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <string>
@@ -25,9 +27,16 @@ namespace voxcone {
 namespace {
 
 using test::renderWith;
+using test::report;
 
-void expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;
+/// Also returns the largest channel error, for report().
+float expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
+  float worst = 0.0f;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;
+    worst = std::max(worst, std::fabs(a[c] - b[c]));
+  }
+  return worst;
 }
 
 double lum(const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; }
@@ -40,16 +49,20 @@ Texture quadrants() { return Texture(2, 2, {kTopLeft, kTopRight, kBottomLeft, kB
 TEST(Texture, BilinearLookupFollowsTheConvention) {
   const Texture t = quadrants();
   // Texel centres: u = (i + 0.5) / 2, v = 1 - (j + 0.5) / 2.
-  expectVecNear(t.lookup(Vec2(0.25f, 0.75f)), kTopLeft, 1e-6f, "top left");
-  expectVecNear(t.lookup(Vec2(0.75f, 0.75f)), kTopRight, 1e-6f, "top right");
-  expectVecNear(t.lookup(Vec2(0.25f, 0.25f)), kBottomLeft, 1e-6f, "bottom left");
-  expectVecNear(t.lookup(Vec2(0.75f, 0.25f)), kBottomRight, 1e-6f, "bottom right");
+  float worst = 0.0f;  // of the 1e-6 checks
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.25f, 0.75f)), kTopLeft, 1e-6f, "top left"));
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.75f, 0.75f)), kTopRight, 1e-6f, "top right"));
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.25f, 0.25f)), kBottomLeft, 1e-6f, "bottom left"));
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.75f, 0.25f)), kBottomRight, 1e-6f, "bottom right"));
   // Halfway between the two top texels; the corner (0, 0) is the mean of all four (repeat).
-  expectVecNear(t.lookup(Vec2(0.5f, 0.75f)), 0.5f * (kTopLeft + kTopRight), 1e-6f, "between");
-  expectVecNear(t.lookup(Vec2(0.0f, 0.0f)), t.mean(), 1e-6f, "corner");
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.5f, 0.75f)), 0.5f * (kTopLeft + kTopRight), 1e-6f, "between"));
+  worst = std::max(worst, expectVecNear(t.lookup(Vec2(0.0f, 0.0f)), t.mean(), 1e-6f, "corner"));
   // Repeat: whole periods, negative ones included, change nothing.
-  expectVecNear(t.lookup(Vec2(3.25f, -1.75f)), kBottomLeft, 1e-5f, "repeat");
-  expectVecNear(t.mean(), 0.25f * (kTopLeft + kTopRight + kBottomLeft + kBottomRight), 1e-6f, "mean");
+  const float repeat = expectVecNear(t.lookup(Vec2(3.25f, -1.75f)), kBottomLeft, 1e-5f, "repeat");
+  worst = std::max(worst, expectVecNear(t.mean(), 0.25f * (kTopLeft + kTopRight + kBottomLeft + kBottomRight), 1e-6f,
+                                        "mean"));
+  report("worst lookup error", worst, 1e-6);
+  report("repeat lookup error", repeat, 1e-5);
   EXPECT_THROW(Texture(2, 2, {kTopLeft}), Error);
   EXPECT_THROW(Texture(1, 1, {Vec3(-0.1f)}), Error);
 }
@@ -79,7 +92,7 @@ TEST_F(TextureFiles, EightBitFilesAreDecodedFromSrgb) {
   Image img(1, 1, Vec3(0.2158605f, 0.0f, 1.0f));
   writeImage(path("t.png"), img, nlohmann::json::object());
   const Texture t = loadTexture(path("t.png"));
-  expectVecNear(t.texel(0, 0), Vec3(0.215861f, 0.0f, 1.0f), 2e-6f);
+  report("decoded texel error", expectVecNear(t.texel(0, 0), Vec3(0.215861f, 0.0f, 1.0f), 2e-6f), 2e-6);
   EXPECT_EQ(t.file, path("t.png"));
   try {
     loadTexture(path("missing.png"));
@@ -135,16 +148,35 @@ TEST_F(TextureFiles, ACheckerUnderAConstantSkyShowsItsAlbedoInEveryMethod) {
                                    expected(kTopRight, kTopLeft, kBottomRight, kBottomLeft),
                                    expected(kBottomLeft, kBottomRight, kTopLeft, kTopRight),
                                    expected(kBottomRight, kBottomLeft, kTopRight, kTopLeft)};
+  // The quadrant channel nearest its bound, and the worst mean, over the methods.
+  double worstErr = -1.0, worstTol = 1.0, worstMean = -1.0;
+  std::string worstAt, worstMeanAt;
   for (const char* method : {"whitted", "path", "voxcone"}) {
     const Image img = renderWith(loaded, method, loaded.render).image;
     const std::vector<DVec3> got = quadrantMeans(img);
     for (size_t q = 0; q < 4; ++q)
       for (int c = 0; c < 3; ++c)
         EXPECT_NEAR(got[q][c], want[q][c], 0.03 * want[q][c] + 0.002) << method << " quadrant " << q << " channel " << c;
+    for (size_t q = 0; q < 4; ++q)
+      for (int c = 0; c < 3; ++c) {
+        const double err = std::fabs(got[q][c] - want[q][c]), tol = 0.03 * want[q][c] + 0.002;
+        if (err / tol > worstErr / worstTol) {
+          worstErr = err;
+          worstTol = tol;
+          worstAt = std::string(method) + " quadrant " + std::to_string(q) + " channel " + std::to_string(c);
+        }
+      }
     DVec3 mean(0.0);
     for (const DVec3& g : got) mean += g / 4.0;
     EXPECT_NEAR(lum(mean), lum(DVec3(t.mean())), 0.02 * lum(DVec3(t.mean()))) << method;
+    const double meanOff = std::fabs(lum(mean) / lum(DVec3(t.mean())) - 1.0);
+    if (meanOff > worstMean) {
+      worstMean = meanOff;
+      worstMeanAt = method;
+    }
   }
+  report("quadrant error nearest its bound (" + worstAt + ")", worstErr, worstTol);
+  report("mean luminance relative error (" + worstMeanAt + ")", worstMean, 0.02);
 }
 
 TEST_F(TextureFiles, ObjTexcoordsAndMapKdMatchTheJsonQuad) {
@@ -170,7 +202,9 @@ TEST_F(TextureFiles, ObjTexcoordsAndMapKdMatchTheJsonQuad) {
   EXPECT_EQ(obj.materials[obj.triMaterial[0]].albedo, Vec3(1.0f));
   const Image a = renderWith(json, "whitted", json.render).image;
   const Image b = renderWith(obj, "whitted", obj.render).image;
-  EXPECT_LT(compareImages(b, a).relMse, 1e-3);
+  const double objRelMse = compareImages(b, a).relMse;
+  report("OBJ vs JSON relMSE", objRelMse, 1e-3);
+  EXPECT_LT(objRelMse, 1e-3);
 
   // The same quad as an ASCII PLY with u v.
   writeText("q.ply",
@@ -183,7 +217,9 @@ TEST_F(TextureFiles, ObjTexcoordsAndMapKdMatchTheJsonQuad) {
   ASSERT_EQ(ply.uvs.size(), 4u);
   EXPECT_EQ(ply.uvs[2], Vec2(1.0f, 1.0f));
   const Image c = renderWith(ply, "whitted", ply.render).image;
-  EXPECT_LT(compareImages(c, a).relMse, 1e-3);
+  const double plyRelMse = compareImages(c, a).relMse;
+  report("PLY vs JSON relMSE", plyRelMse, 1e-3);
+  EXPECT_LT(plyRelMse, 1e-3);
 }
 
 TEST_F(TextureFiles, MitsubaBitmapOnARectangle) {
@@ -212,7 +248,9 @@ TEST_F(TextureFiles, MitsubaBitmapOnARectangle) {
   RenderSettings s = json.render;
   const Image a = renderWith(json, "whitted", s).image;
   const Image b = renderWith(mts, "whitted", s).image;
-  EXPECT_LT(compareImages(b, a).relMse, 1e-3);
+  const double relMse = compareImages(b, a).relMse;
+  report("Mitsuba vs JSON relMSE", relMse, 1e-3);
+  EXPECT_LT(relMse, 1e-3);
   // Unsupported bitmap settings are errors, not a different image.
   std::string raw = xml;
   raw.replace(raw.find("<string name=\"filename\""), 0, "<boolean name=\"raw\" value=\"true\"/>");
@@ -258,11 +296,15 @@ TEST_F(TextureFiles, WritersKeepTheTextureAndTheCoordinates) {
   writeJsonScene(json, path("out.json"));
   const Scene back = loadScene(path("out.json"));
   ASSERT_EQ(back.textures.size(), 1u);
-  EXPECT_LT(compareImages(renderWith(back, "whitted", json.render).image, a).relMse, 1e-3);
+  const double jsonRelMse = compareImages(renderWith(back, "whitted", json.render).image, a).relMse;
+  report("JSON round trip relMSE", jsonRelMse, 1e-3);
+  EXPECT_LT(jsonRelMse, 1e-3);
   writeMitsubaScene(json, path("out.xml"));
   const Scene xmlBack = loadMitsubaScene(path("out.xml"));
   ASSERT_EQ(xmlBack.textures.size(), 1u);
-  EXPECT_LT(compareImages(renderWith(xmlBack, "whitted", json.render).image, a).relMse, 1e-3);
+  const double xmlRelMse = compareImages(renderWith(xmlBack, "whitted", json.render).image, a).relMse;
+  report("XML round trip relMSE", xmlRelMse, 1e-3);
+  EXPECT_LT(xmlRelMse, 1e-3);
 }
 
 }  // namespace
