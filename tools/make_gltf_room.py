@@ -2,7 +2,7 @@
 """A sky-lit room as glTF 2.0, for checking the glTF loader, textures and the sky against an
 independent renderer (Blender's Cycles through its own glTF importer).
 
-    tools/make_gltf_room.py OUTDIR [--held-out | --held-out-2]
+    tools/make_gltf_room.py OUTDIR [--held-out | --held-out-2 | --held-out-3]
 
 Writes OUTDIR/room.glb (textured diffuse walls and floor as 0.15 m slabs, a window in the +z
 wall, a textured block, an emissive lamp under the ceiling, a perspective camera; the textures
@@ -15,6 +15,9 @@ committed output: the files are small and made on demand.
 ceiling at the other end, a lower block, a 20 m ground and the camera in the other corner.
 --held-out-2 another: 3.5 x 2.5 x 4.5 m, a small window by a corner (0.5 to 1.5 m across, 1.0
 to 2.1 m high), the lamp 0.3 m under the ceiling and in view, a taller block, a 24 m ground.
+--held-out-3 a third, made after the emission guide's bound was chosen on the first three: 6 x
+3 x 4 m, a wide low window at one end (-2.6 to -0.4 m across, 0.4 to 1.4 m high), the lamp 5 cm
+under the ceiling at the far end, a low wide block, a 20 m ground, the camera by the far wall.
 """
 
 import json
@@ -40,6 +43,10 @@ HELD_OUT_2 = {"W": 1.75, "H": 2.5, "D": 2.25, "window_x": (0.5, 1.5), "window_y"
               "block": ([-1.4, 0, 0.5], [-0.6, 0.9, 1.5]), "lamp_xz": ((-0.5, -1.0), (0.0, -0.5)), "lamp_gap": 0.3,
               "ground": 12,
               "camera": {"position": [1.2, 1.4, -1.9], "target": [-0.6, 1.0, 1.5], "fov_y_deg": 65.0}}
+HELD_OUT_3 = {"W": 3.0, "H": 3.0, "D": 2.0, "window_x": (-2.6, -0.4), "window_y": (0.4, 1.4),
+              "block": ([0.2, 0, -0.2], [1.6, 0.45, 0.8]), "lamp_xz": ((1.8, -1.2), (2.4, -0.6)), "lamp_gap": 0.05,
+              "ground": 10,
+              "camera": {"position": [2.6, 1.7, -1.7], "target": [-1.2, 0.8, 1.6], "fov_y_deg": 70.0}}
 
 
 def png(width, height, rgb_rows):
@@ -175,7 +182,7 @@ def box(lo, hi, scale=1.0):
 
 
 def main():
-    layouts = {"--held-out": HELD_OUT, "--held-out-2": HELD_OUT_2}
+    layouts = {"--held-out": HELD_OUT, "--held-out-2": HELD_OUT_2, "--held-out-3": HELD_OUT_3}
     args = sys.argv[1:]
     chosen = [a for a in args if a in layouts]
     args = [a for a in args if a not in layouts]
