@@ -43,6 +43,15 @@ std::vector<EmissionGuide::Useful> evenSamples(int n, int dim, double lo, double
   return out;
 }
 
+/// `n` useful photons of one store each at uniformly random points of [0,1)^6 (stream `seed`).
+std::vector<EmissionGuide::Useful> randomSamples(int n, uint64_t seed) {
+  std::vector<EmissionGuide::Useful> out(static_cast<size_t>(n));
+  Rng pick(seed, 0);
+  for (EmissionGuide::Useful& u : out)
+    for (int d = 0; d < EmissionSample::kDims; ++d) u.sample.set(d, pick.uniform());
+  return out;
+}
+
 /// The density (pmf over volume) of leaf b.
 double density(const EmissionGuide& g, size_t b) { return g.pmf(b) / g.volume(b); }
 
@@ -169,11 +178,9 @@ TEST(EmissionGuide, GuidedSamplesHaveTheGuidesDensityAndUnbiasedWeights) {
   // within 5 sigma of its pmf, every remapped sample inside the leaf its weight belongs to, and
   // the weighted mean of f(u) = 3 uLight^2 * 2 uSide * 2 uPos.x * (1 + cos(2 pi uDir.y)) equal
   // to its integral over the unit cube, 1, within 5 estimated standard errors.
-  std::vector<EmissionGuide::Useful> useful;
-  Rng pick(7, 0);
+  std::vector<EmissionGuide::Useful> useful = randomSamples(900, 7);
   for (int k = 0; k < 900; ++k) {
-    EmissionGuide::Useful u;
-    for (int d = 0; d < EmissionSample::kDims; ++d) u.sample.set(d, pick.uniform());
+    EmissionGuide::Useful& u = useful[size_t(k)];
     if (k < 600) {
       u.sample.uPos.x *= 0.1f;
       u.sample.uDir.y = 0.6f + 0.1f * u.sample.uDir.y;
@@ -181,7 +188,6 @@ TEST(EmissionGuide, GuidedSamplesHaveTheGuidesDensityAndUnbiasedWeights) {
       u.sample.uLight *= 0.2;
     }
     u.stores = 1.0 + double(k % 3);
-    useful.push_back(u);
   }
   const EmissionGuide g = EmissionGuide::fromUseful(useful, {0.2}, 0.25, 32, 32);
   ASSERT_GT(g.leaves(), 8u);
@@ -253,13 +259,7 @@ TEST(EmissionGuide, TheYieldJudgedOnHeldOutPhotonsIsNotTheFitsPromise) {
   // other half's, it promises what it gives. Bound: 5 standard deviations of the held-out
   // estimate (a Poisson count of 1,000 photons per half: 5 / sqrt(1000) = 16%); measured 0.0200.
   // The promise judged on the fit itself (floor 0.05, unbounded) measured 0.0219.
-  std::vector<EmissionGuide::Useful> useful;
-  Rng pick(11, 0);
-  for (int k = 0; k < 2000; ++k) {
-    EmissionGuide::Useful u;
-    for (int d = 0; d < EmissionSample::kDims; ++d) u.sample.set(d, pick.uniform());
-    useful.push_back(u);
-  }
+  const std::vector<EmissionGuide::Useful> useful = randomSamples(2000, 11);
   const EmissionGuide g = EmissionGuide::fromUseful(useful, {}, 0.05, 32, 1e9);
   double fitPer = 0.0, fitEffective = 0.0, heldPer = 0.0, heldEffective = 0.0;
   g.expectedYield(100000, fitPer, fitEffective);

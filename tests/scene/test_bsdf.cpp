@@ -852,7 +852,9 @@ TEST(BsdfCoated, RoughPlasticSumsItsBaseAsMitsubaDoes) {
     const float returned =
         (1.0f - m.coat.externalAlbedo) / (2.25f * (1.0f - m.coat.internalReflectance));
     if (alpha < 0.05f) test::report("alpha 0.01 returned share - 1", std::fabs(returned - 1.0f), 0.002);
-    if (alpha < 0.05f) EXPECT_NEAR(returned, 1.0f, 0.002f);
+    if (alpha < 0.05f) {
+      EXPECT_NEAR(returned, 1.0f, 0.002f);
+    }
     for (float c : {0.9f, 0.5f, 0.2f}) {
       float share;
       const Vec3 a = meanWeightWithDelta(m, woAt(c), 200000, share);
@@ -861,7 +863,9 @@ TEST(BsdfCoated, RoughPlasticSumsItsBaseAsMitsubaDoes) {
       const float t = (1.0f - (x - float(i))) * m.coat.transmittance[i] + (x - float(i)) * m.coat.transmittance[i + 1];
       EXPECT_EQ(share, 0.0f);
       EXPECT_NEAR(a.x, (1.0f - t) + t * returned, 0.012f) << "alpha " << alpha << " cos " << c;
-      if (alpha < 0.05f) EXPECT_NEAR(a.x, 1.0f, 0.015f) << "cos " << c;
+      if (alpha < 0.05f) {
+        EXPECT_NEAR(a.x, 1.0f, 0.015f) << "cos " << c;
+      }
       sumOff = std::max(sumOff, std::fabs(a.x - ((1.0f - t) + t * returned)));
       if (alpha < 0.05f) smoothOff = std::max(smoothOff, std::fabs(a.x - 1.0f));
     }

@@ -37,19 +37,11 @@ namespace {
 
 using test::imageMean;
 using test::renderWith;
+using test::expectVecNear;
 using test::report;
 constexpr auto vec = test::jsonVec;
 
 
-/// Also returns the largest channel error, for report().
-float expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
-  float worst = 0.0f;
-  for (int c = 0; c < 3; ++c) {
-    EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;
-    worst = std::max(worst, std::fabs(a[c] - b[c]));
-  }
-  return worst;
-}
 
 /// A 32 x 16 sky: a dim blue gradient above the horizon, a dim brown ground below it, and a
 /// 4 x 2 texel blob of radiance ~18 (columns 19-22, rows 3-4: 34 to 56 degrees from the zenith,

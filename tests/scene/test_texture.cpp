@@ -27,17 +27,9 @@ namespace voxcone {
 namespace {
 
 using test::renderWith;
+using test::expectVecNear;
 using test::report;
 
-/// Also returns the largest channel error, for report().
-float expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
-  float worst = 0.0f;
-  for (int c = 0; c < 3; ++c) {
-    EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;
-    worst = std::max(worst, std::fabs(a[c] - b[c]));
-  }
-  return worst;
-}
 
 double lum(const DVec3& v) { return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z; }
 

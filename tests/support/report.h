@@ -1,8 +1,12 @@
 #pragma once
-// Print a test's measured value next to the bound it asserts, and record it as a property.
+// Print a test's measured value next to the bound it asserts, and record it as a property; a
+// channel-wise check that returns what it measured.
+
+#include "voxcone/core/math.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -27,6 +31,16 @@ inline void report(const std::string& what, double measured, double bound = std:
   for (char& c : key)
     if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
   ::testing::Test::RecordProperty(key, value);
+}
+
+/// EXPECT_NEAR on each channel of a and b; returns the largest channel error, for report().
+inline float expectVecNear(const Vec3& a, const Vec3& b, float tol, const std::string& what = "") {
+  float worst = 0.0f;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(a[c], b[c], tol) << what << " channel " << c;
+    worst = std::max(worst, std::fabs(a[c] - b[c]));
+  }
+  return worst;
 }
 
 }  // namespace voxcone::test

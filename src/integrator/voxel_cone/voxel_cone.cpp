@@ -27,7 +27,9 @@ namespace voxcone {
 
 namespace {
 /// The emission guide's boxes are cut while they hold this many of the pilot's useful photons
-/// (EmissionGuide::fromUseful); fewer in all, and no guide is built.
+/// (EmissionGuide::fromUseful); fewer in all, and no guide is built. A cut leaves about half in
+/// each box, so a leaf's density rests on some 16 photons or more: a Poisson count known within
+/// 1 / sqrt(16) = 25%, as the grid guide's 8 per bin (35%) were. Not measured against others.
 constexpr double kGuideSplit = 32.0;
 /// A guided photon weighs at most this many times a typical useful one (EmissionGuide's bound).
 /// Measured on tools/make_gltf_room.py's three rooms against Cycles (seeds 0-7, 32x32 blocks:
@@ -38,7 +40,9 @@ constexpr double kGuideSplit = 32.0;
 /// 0.0185, 1 / 1 / 0 (728k / 1.05M / 1.25M). The grid guide before it: 0.0148 / 0.0162 /
 /// 0.0189, 0 / 1 / 2 (2M photons in each).
 constexpr double kGuideMaxRatio = 16.0;
-/// The useful photons a pilot is grown to where the first holds fewer.
+/// The useful photons a pilot is grown to where the first holds fewer: what the grid guide's
+/// finest layout asked for (8 per bin in 8 x 16 x 16 bins), kept for the tree; at most an eighth
+/// of max_photons (below), so it costs the sunlit hall a 179k pilot against 45k before.
 constexpr double kPilotUseful = 16384.0;
 /// The share of the gathers' points the distant lights' target sphere holds (SeenRegion::readSphere).
 /// Measured with distant_aim 0.5 on tools/make_gltf_room.py's room against Cycles (seeds 0-7,
