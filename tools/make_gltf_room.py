@@ -2,7 +2,7 @@
 """A sky-lit room as glTF 2.0, for checking the glTF loader, textures and the sky against an
 independent renderer (Blender's Cycles through its own glTF importer).
 
-    tools/make_gltf_room.py OUTDIR [--held-out | --held-out-2 | --held-out-3]
+    tools/make_gltf_room.py OUTDIR [--held-out | --held-out-2 | --held-out-3 | --held-out-4]
 
 Writes OUTDIR/room.glb (textured diffuse walls and floor as 0.15 m slabs, a window in the +z
 wall, a textured block, an emissive lamp under the ceiling, a perspective camera; the textures
@@ -18,6 +18,10 @@ to 2.1 m high), the lamp 0.3 m under the ceiling and in view, a taller block, a 
 --held-out-3 a third, made after the emission guide's bound was chosen on the first three: 6 x
 3 x 4 m, a wide low window at one end (-2.6 to -0.4 m across, 0.4 to 1.4 m high), the lamp 5 cm
 under the ceiling at the far end, a low wide block, a 20 m ground, the camera by the far wall.
+--held-out-4 a fourth, made after the indirect filter's reach and the cone hits' shadow rays were
+chosen on the first four: 3 x 3.4 x 5 m, tall and narrow, a high narrow window (-0.9 to -0.1 m
+across, 1.6 to 3.0 m high), the lamp 0.15 m under the ceiling in the middle and in view, a
+cabinet 1.6 m tall against a side wall, a 12 m ground, the camera low and looking up.
 """
 
 import json
@@ -47,6 +51,10 @@ HELD_OUT_3 = {"W": 3.0, "H": 3.0, "D": 2.0, "window_x": (-2.6, -0.4), "window_y"
               "block": ([0.2, 0, -0.2], [1.6, 0.45, 0.8]), "lamp_xz": ((1.8, -1.2), (2.4, -0.6)), "lamp_gap": 0.05,
               "ground": 10,
               "camera": {"position": [2.6, 1.7, -1.7], "target": [-1.2, 0.8, 1.6], "fov_y_deg": 70.0}}
+HELD_OUT_4 = {"W": 1.5, "H": 3.4, "D": 2.5, "window_x": (-0.9, -0.1), "window_y": (1.6, 3.0),
+              "block": ([-1.5, 0, -0.5], [-0.9, 1.6, 0.7]), "lamp_xz": ((-0.3, -0.3), (0.3, 0.3)), "lamp_gap": 0.15,
+              "ground": 12,
+              "camera": {"position": [1.0, 1.0, -2.2], "target": [-0.5, 1.9, 2.0], "fov_y_deg": 62.0}}
 
 
 def png(width, height, rgb_rows):
@@ -182,7 +190,8 @@ def box(lo, hi, scale=1.0):
 
 
 def main():
-    layouts = {"--held-out": HELD_OUT, "--held-out-2": HELD_OUT_2, "--held-out-3": HELD_OUT_3}
+    layouts = {"--held-out": HELD_OUT, "--held-out-2": HELD_OUT_2, "--held-out-3": HELD_OUT_3,
+               "--held-out-4": HELD_OUT_4}
     args = sys.argv[1:]
     chosen = [a for a in args if a in layouts]
     args = [a for a in args if a not in layouts]

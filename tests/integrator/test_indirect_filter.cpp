@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
+
 namespace voxcone {
 namespace {
 
@@ -177,6 +180,75 @@ TEST(IndirectFilter, NoiseOnOneSurfaceFallsByTheKernelsSampleCount) {
   stats(out, m1, v1);
   EXPECT_NEAR(m1, m0, 0.01);
   EXPECT_GT(v0 / v1, 20.0);
+}
+
+TEST(IndirectFilter, ReachIsTheDistanceToTheSurfaceThatMeetsThePixels) {
+  // A floor (z = 0, normal +z) for x < 12 and a wall for x >= 12 standing on it (x = 12, z = x -
+  // 11.5, normal -x): a floor pixel x reaches scale * its distance to the wall's first pixel in
+  // its row, sqrt((12 - x)^2 + 0.25), when that pixel is within the radius; farther, infinitely.
+  constexpr int kW = 24, kH = 8, kRadius = 6;
+  const auto corner = [&] {
+    IndirectBuffer b = planeBuffer(kW, kH, Vec3(1.0f));
+    for (int y = 0; y < kH; ++y)
+      for (int x = 12; x < kW; ++x) {
+        b.position[size_t(y) * kW + x] = Vec3(12.0f, float(y), float(x) - 11.5f);
+        b.normal[size_t(y) * kW + x] = Vec3(-1, 0, 0);
+      }
+    return b;
+  };
+  IndirectBuffer b = corner();
+  std::vector<float> reach = surfaceReach(b, kRadius, 2.0f);
+  for (int x = 0; x < 12; ++x) {
+    const float expected = 12 - x <= kRadius ? 2.0f * std::sqrt(float((12 - x) * (12 - x)) + 0.25f)
+                                             : std::numeric_limits<float>::infinity();
+    EXPECT_FLOAT_EQ(reach[size_t(3) * kW + x], expected) << x;
+  }
+  // The edge's own pixels (seeing both) are passed over: the wall is still found beyond them.
+  for (int y = 0; y < kH; ++y) b.filterable[size_t(y) * kW + 12] = b.filterable[size_t(y) * kW + 13] = 0u;
+  reach = surfaceReach(b, kRadius, 1.0f);
+  EXPECT_FLOAT_EQ(reach[size_t(3) * kW + 10], std::sqrt(4.0f + 2.5f * 2.5f));  // to (12, 3, 2.5)
+  // Three such pixels in a row: what lies beyond is not taken as meeting the floor.
+  for (int y = 0; y < kH; ++y) b.filterable[size_t(y) * kW + 14] = 0u;
+  reach = surfaceReach(b, kRadius, 1.0f);
+  EXPECT_TRUE(std::isinf(reach[size_t(3) * kW + 10]));
+  // One plane, or nothing beside it (the sky): no limit.
+  b = planeBuffer(kW, kH, Vec3(1.0f));
+  for (float r : surfaceReach(b, kRadius, 1.0f)) EXPECT_TRUE(std::isinf(r));
+  for (int y = 0; y < kH; ++y)
+    for (int x = 12; x < kW; ++x) b.filterable[size_t(y) * kW + x] = 0u;
+  for (float r : surfaceReach(b, kRadius, 1.0f)) EXPECT_TRUE(std::isinf(r));
+  // A floor 50 units behind the pixel's (a silhouette, not an edge): reach 50 and more.
+  b = planeBuffer(kW, kH, Vec3(1.0f));
+  for (int y = 0; y < kH; ++y)
+    for (int x = 12; x < kW; ++x) b.position[size_t(y) * kW + x].z = -50.0f;
+  reach = surfaceReach(b, kRadius, 1.0f);
+  EXPECT_GE(reach[size_t(3) * kW + 11], 50.0f);
+}
+
+TEST(IndirectFilter, ReachLimitsWhatAPixelTakesAndGives) {
+  // A row, radius 4 (sigma 2, weight e^(-d^2 / 8) at distance d), every pixel reaching 1: the
+  // middle one takes its two neighbours only; a neighbour reaching 0.5 is left out both ways
+  // (the walk also stops there: the pixel beyond it is not reached).
+  IndirectBuffer b = planeBuffer(9, 1, Vec3(0.0f));
+  for (int x = 0; x < 9; ++x) b.indirect[size_t(x)] = Vec3(float(x * x));
+  b.reach.assign(9, 1.0f);
+  const float g = std::exp(-1.0f / 8.0f);
+  std::vector<Vec3> out = filterIndirect(b, 4);
+  EXPECT_NEAR(out[4].x, (g * 9.0f + 16.0f + g * 25.0f) / (1.0f + 2.0f * g), 1e-4f);
+  b.reach[5] = 0.5f;
+  out = filterIndirect(b, 4);
+  EXPECT_NEAR(out[4].x, (g * 9.0f + 16.0f) / (1.0f + g), 1e-4f);
+  EXPECT_EQ(out[5].x, 25.0f);
+  // Unlimited, the middle one takes all nine.
+  b.reach.clear();
+  out = filterIndirect(b, 4);
+  double num = 0.0, den = 0.0;
+  for (int x = 0; x < 9; ++x) {
+    const double w = std::exp(-double((x - 4) * (x - 4)) / 8.0);
+    num += w * x * x;
+    den += w;
+  }
+  EXPECT_NEAR(out[4].x, num / den, 1e-4);
 }
 
 }  // namespace

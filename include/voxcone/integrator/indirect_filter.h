@@ -34,7 +34,19 @@ struct IndirectBuffer {
   /// Bit 0: the pixel and its right neighbour see each other's points; bit 1: the same for the
   /// one below. Empty: every pair of adjacent pixels is linked.
   std::vector<uint8_t> link;
+  /// How far (world units) the pixel's light may be carried, and taken from: a neighbour counts
+  /// only within the smaller of the two pixels' reaches (surfaceReach). Empty: no limit.
+  std::vector<float> reach;
 };
+
+/// Each filterable pixel's reach: `scale` times the world distance from its point to the nearest
+/// other surface that meets its own within `radius` pixels in the image (looking along its row,
+/// its column and both diagonals past the pixels that see both, to the first pixel of another
+/// surface near it in depth); infinite where none does. Near a concave edge (a wall under a
+/// ceiling) the indirect light falls within about that distance of the edge (the other surface
+/// hides part of the room), so a filter that averages over more carries the brighter light from
+/// farther away into the edge: 3-5% brighter 32x32 blocks along a room's wall-ceiling edges.
+std::vector<float> surfaceReach(const IndirectBuffer& in, int radius, float scale);
 
 /// Whether adjacent pixels p and q (filterable) see one surface by the filter's tests: the same
 /// material, normals within 25 degrees, q within two of p's footprints of p's tangent plane.

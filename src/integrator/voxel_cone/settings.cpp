@@ -34,6 +34,18 @@ constexpr int kDefaultGatherSpacing = 4;
 /// estimate at its hit; with "march", 6 marched cones (their defaults' measurements above).
 constexpr int kDefaultHitCones = 32;
 constexpr int kDefaultMarchCones = 6;
+/// The filter's reach in distances to the nearest surface that meets a pixel's own. Measured on
+/// tools/make_gltf_room.py's four rooms against Cycles (seeds 0-7, 32x32 blocks; with 4 hit light
+/// samples), the seeds with a block beyond 10% in room / --held-out / -2 / -3: no limit 0 / 1 /
+/// 0 / 1, 1: none (worst 1.100 / 1.074 / 1.098 / 1.098), 2: none (1.100 / 1.090 / 1.096 /
+/// 1.098); filter 0 (a gather at every pixel) put --held-out-3's wall-ceiling row at 1.01 where
+/// the unlimited filter put it at 1.03-1.05.
+constexpr double kDefaultFilterReach = 1.0;
+/// Shadow rays at each cone's hit. Measured on --held-out-3 (its lamp 5 cm under the ceiling,
+/// behind the camera; photon seed fixed, pixel seeds 0-5): the standard deviation of a top-two-
+/// rows 32x32 block 0.0219 / 0.0144 / 0.0141 at 1 / 4 / 8 (128 cones instead of 32: 0.0133), the
+/// render 1.42 / 1.52 / 1.64 s.
+constexpr int kDefaultHitLightSamples = 4;
 /// The share of a distant light's photons aimed at what the gathers read. Measured at seeds 0-7
 /// on tools/make_gltf_room.py's room against Cycles (32x32 blocks) and at seeds 1-3 on sky-room
 /// against path (4x4 cells): 0 left 3 of 8 seeds with a block out of 10% (worst 1.152), 0.5 and
@@ -158,6 +170,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   out.lightSamples = r.integer("light_samples", 1, 1, 1024);
   out.gathers = r.integer("gathers", kDefaultGathers, 0, 1 << 24);
   out.filterRadius = r.integer("filter", kDefaultFilterRadius, 0, 64);
+  out.filterReach = float(r.number("filter_reach", kDefaultFilterReach, 0.0, 1e3));
   out.gatherSpacing = r.integer("gather_spacing", out.filterRadius > 0 ? kDefaultGatherSpacing : 1, 1, 16);
   if (out.gatherSpacing > 1 && out.filterRadius == 0)
     throw SettingsError("voxcone.gather_spacing: above 1 needs the filter (filter > 0) to fill the other pixels");
@@ -180,6 +193,7 @@ VoxelConeSettings VoxelConeSettings::fromOptions(const nlohmann::json& options, 
   // window, gave 29.2 dB by cones, 26.9 by rays at the same worst cell).
   const std::string sky = r.choice("sky_light", {"auto", "cones", "rays"});
   out.skyByCones = out.hitGather && (sky == "cones" || (sky == "auto" && scene.environment && scene.environment->isConstant()));
+  out.hitLightSamples = r.integer("hit_light_samples", kDefaultHitLightSamples, 1, 64);
   out.glintSamples = r.integer("glint_samples", anyDelta ? kDefaultGlintSamples : 0, 0, 4096);
   out.hitEstimate.k = r.integer("hit_photons", kDefaultHitPhotons, 1, 4096);
   out.hitEstimate.maxRadius = float(r.number("hit_radius", kDefaultHitRadius * double(std::max(sceneRadius, 1e-30f)), 1e-30, 1e30));
@@ -221,9 +235,11 @@ nlohmann::json VoxelConeSettings::toJson() const {
           {"cone_step", coneStep},
           {"max_distance", maxDistance},
           {"light_samples", lightSamples},
+          {"hit_light_samples", hitLightSamples},
           {"gathers", gathers},
           {"filter", filterRadius},
           {"gather_spacing", gatherSpacing},
+          {"filter_reach", filterReach},
           {"exact_segment", exactSegment},
           {"gather", hitGather ? "hit" : "march"},
           {"hit_radiance", hitPhotons ? "photons" : "field"},

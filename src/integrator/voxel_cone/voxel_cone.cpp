@@ -599,6 +599,7 @@ void VoxelConeIntegrator::linkIndirect(IndirectBuffer& b) const {
       }
     }
   });
+  if (m_settings.filterReach > 0.0f) b.reach = surfaceReach(b, m_settings.filterRadius, m_settings.filterReach);
 }
 
 bool VoxelConeIntegrator::linkedPoints(const Vec3& from, const Vec3& to) const {

@@ -110,6 +110,7 @@ private:
   float m_coneStep, m_maxDistance, m_exactSegment;  ///< exact segment in finest voxels
   bool m_hitGather;
   bool m_hitDirect;
+  int m_hitLightSamples;  ///< shadow rays at a hit (VoxelConeSettings::hitLightSamples)
   bool m_hitEnvironment;  ///< m_hitDirect under a sky: its light at a hit where its photons are not kept
   float m_v0 = 0.0f;  ///< finest voxel size
   int m_finest = 0, m_coarsest = 0;

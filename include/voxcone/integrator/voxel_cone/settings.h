@@ -58,8 +58,14 @@ struct VoxelConeSettings {
   float coneStep = 1.0f;        ///< march step in lookup voxels, [0.25, 4]
   float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter
   int lightSamples = 1;         ///< shadow rays per shading point
+  /// `hit_light_samples`: shadow rays to the lamps and suns at each cone's hit (with hit_direct =
+  /// "rays"), spread over the light's samples by an R2 sequence around the cone's own.
+  int hitLightSamples = 4;
   int gathers = 1;              ///< gathering samples per gathering pixel (0: every sample)
   int filterRadius = 12;        ///< screen-space filter radius, pixels (0: off)
+  /// `filter_reach`: the filter carries a pixel's light at most this many times the distance from
+  /// its point to the nearest other surface that meets its own (surfaceReach); 0: no limit.
+  float filterReach = 1.0f;
   int gatherSpacing = 4;        ///< one gathering pixel per spacing x spacing block
   float exactSegment = 32.0f;   ///< exact ray along each cone axis, finest voxels (0: off)
   bool hitGather = true;        ///< gather = "hit" (the default) instead of "march"
