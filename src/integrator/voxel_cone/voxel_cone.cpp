@@ -321,7 +321,6 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     // edge the part's mean is far from the point's light (PhotonRadianceSettings::edgeFit).
     PhotonRadianceSettings nearEstimate = m_settings.hitEstimate;
     nearEstimate.edgeFit = m_settings.nearEdgeFit;
-    if (getenv("GG_NK")) nearEstimate.k = atoi(getenv("GG_NK"));
     m_nearPhotons = PhotonRadiance(m_scene, m_accel, std::move(near), nearEstimate);
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
