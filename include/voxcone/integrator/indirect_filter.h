@@ -40,12 +40,13 @@ struct IndirectBuffer {
 };
 
 /// Each filterable pixel's reach: `scale` times the world distance from its point to the nearest
-/// other surface that meets its own within `radius` pixels in the image (looking along its row,
-/// its column and both diagonals past the pixels that see both, to the first pixel of another
-/// surface near it in depth); infinite where none does. Near a concave edge (a wall under a
-/// ceiling) the indirect light falls within about that distance of the edge (the other surface
-/// hides part of the room), so a filter that averages over more carries the brighter light from
-/// farther away into the edge: 3-5% brighter 32x32 blocks along a room's wall-ceiling edges.
+/// point of another surface within `radius` pixels in the image (looking along its row, its
+/// column and both diagonals, past up to two pixels that see both surfaces, to the first pixel of
+/// another; a surface far behind an outline is far in the world too); infinite where there is
+/// none. Near a concave edge (a wall under a ceiling) the indirect light falls within about that
+/// distance of the edge (the other surface hides part of the room), so a filter that averages
+/// over more carries the brighter light from farther away into the edge: 3-5% brighter 32x32
+/// blocks along a room's wall-ceiling edges.
 std::vector<float> surfaceReach(const IndirectBuffer& in, int radius, float scale);
 
 /// Whether adjacent pixels p and q (filterable) see one surface by the filter's tests: the same

@@ -24,8 +24,8 @@ ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField&
     : m_scene(scene), m_accel(accel), m_field(field), m_photons(s.hitPhotons ? photons : nullptr),
       m_proximity(m_photons && proximity && !proximity->empty() ? proximity : nullptr),
       m_coneStep(s.coneStep), m_maxDistance(s.maxDistance), m_exactSegment(s.exactSegment),
-      m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect), m_hitLightSamples(std::max(s.hitLightSamples, 1)),
-      m_hitEnvironment(m_hitDirect && scene.environment) {
+      m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect),
+      m_hitLightSamples(std::max(s.hitLightSamples, 1)), m_hitEnvironment(m_hitDirect && scene.environment) {
   const std::vector<int> levels = m_field.levels();
   if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
   m_finest = levels.front();

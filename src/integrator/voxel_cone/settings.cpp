@@ -39,7 +39,8 @@ constexpr int kDefaultMarchCones = 6;
 /// samples), the seeds with a block beyond 10% in room / --held-out / -2 / -3: no limit 0 / 1 /
 /// 0 / 1, 1: none (worst 1.100 / 1.074 / 1.098 / 1.098), 2: none (1.100 / 1.090 / 1.096 /
 /// 1.098); filter 0 (a gather at every pixel) put --held-out-3's wall-ceiling row at 1.01 where
-/// the unlimited filter put it at 1.03-1.05.
+/// the unlimited filter put it at 1.03-1.05. The pixels it leaves without a gather in reach gather
+/// themselves: --held-out-3 runs 5254 gathers against 4035 unlimited (0.46 s of its 1.6 s).
 constexpr double kDefaultFilterReach = 1.0;
 /// Shadow rays at each cone's hit. Measured on --held-out-3 (its lamp 5 cm under the ceiling,
 /// behind the camera; photon seed fixed, pixel seeds 0-5): the standard deviation of a top-two-
