@@ -177,26 +177,36 @@ TEST(NearLight, ALampUnderTheCeilingMatchesPathAndNoCellMovesWithTheSeed) {
 
 // The lamp room, closed, under a bright sky outside: by power the sky takes all but 0.5% of the
 // photons (10.8k of the main pass's 2M), and none of its light gets in, so the room's light is
-// the lamp's alone, as without the sky. The lamp pass (90k photons) and the main pass's lamp
+// the lamp's alone, as without the sky. The lamp pass (190k photons) and the main pass's lamp
 // photons each weigh in by their share; near_light 1.5 m gives the photons at the gathering
 // points most of the light that bounced, so a wrong weight shows (leaving the pass's photons at
-// full weight: mean 1.031, worst cell 0.096). Measured at seed 1: mean 0.990 of the sky-less
-// room's at the same seed, worst cell 0.046 (without the pass 0.056); with the grid emission
-// guide before the tree, at seeds 1 / 2 / 3: mean 0.995 / 0.987 / 1.003, worst cell 0.056 /
-// 0.055 / 0.045.
+// full weight: mean 1.031, worst cell 0.096, at seed 1). Measured over seeds 1-3 (the pass
+// 190k photons): mean 0.997 of the sky-less room's, worst cell 0.041; without the pass 0.022
+// (here the main pass's 10.8k lamp photons do as well: at seed 1 alone 0.056 against 0.046-0.078
+// with passes of 90k-390k photons; the rooms of tools/make_gltf_room.py are where it pays).
 
 TEST(NearLight, ALampStarvedByASkyGetsAPassOfItsOwn) {
   const Scene plain = lampUnderCeilingScene(0.02f, 48, 16);
   const Scene sky = lampUnderCeilingScene(0.02f, 48, 16, R"([{"type": "environment", "radiance": 40}])");
-  RenderSettings s = plain.render;
-  s.seed = 1;
-  s.method = "voxcone";
+  // The mean image of seeds 1-3 (a cell of one seed's is known to about 3%: the worst of 16 cells
+  // between two such images moved between 0.046 and 0.078 with the pass's photon count).
   const auto render = [&](const Scene& scene, const nlohmann::json& options, nlohmann::json* stats) {
     const Hbvh accel(scene);
-    auto integrator = createIntegrator("voxcone", IntegratorContext{scene, accel, s, options});
-    integrator->prepare(nullptr);
-    if (stats) *stats = integrator->statsJson();
-    return renderImage(scene, *integrator, s).image;
+    Image sum;
+    for (const uint64_t seed : {1u, 2u, 3u}) {
+      RenderSettings s = plain.render;
+      s.seed = seed;
+      s.method = "voxcone";
+      auto integrator = createIntegrator("voxcone", IntegratorContext{scene, accel, s, options});
+      integrator->prepare(nullptr);
+      if (stats && seed == 1u) *stats = integrator->statsJson();
+      const Image img = renderImage(scene, *integrator, s).image;
+      if (sum.pixels.empty()) sum = img;
+      else
+        for (size_t p = 0; p < sum.pixels.size(); ++p) sum.pixels[p] += img.pixels[p];
+    }
+    for (Vec3& v : sum.pixels) v /= 3.0f;
+    return sum;
   };
   nlohmann::json stats;
   const nlohmann::json wide = {{"near_light", 1.5}};
@@ -209,10 +219,10 @@ TEST(NearLight, ALampStarvedByASkyGetsAPassOfItsOwn) {
                worstWithout = worstDeviation(cellRatios(without, reference));
   std::printf("lamp pass %s\n", stats["near_light"]["lamp_pass"].dump().c_str());
   report("mean / the sky-less room's - 1 (bound on |x|)", mean - 1.0, 0.025);
-  report("worst cell vs the sky-less room", worst, 0.075);
+  report("worst cell vs the sky-less room", worst, 0.06);
   report("without the pass: worst cell", worstWithout);
   EXPECT_NEAR(mean, 1.0, 0.025);
-  EXPECT_LT(worst, 0.075);
+  EXPECT_LT(worst, 0.06);
 }
 
 }  // namespace

@@ -35,8 +35,8 @@ struct VoxelConeSettings {
   uint64_t maxPhotons = 0;
   /// `lamp_photons` (with near_light): where the main pass sends fewer than a quarter of this
   /// many photons from the lamps (a sky or a sun takes the rest by power), a pass of the lamps'
-  /// own photons makes them up to it for the near_light photons' estimates. Default half the
-  /// photon target (0 without one); 0: none.
+  /// own photons makes them up to it for the near_light photons' estimates. Default the photon
+  /// target (0 without one); 0: none.
   uint64_t lampPhotons = 0;
   /// `photon_guide`: with photon_target, the second pass's emission guided by where the pilot's
   /// photons were of use (EmissionGuide), each bin keeping `guideFloor` of its uniform share;
