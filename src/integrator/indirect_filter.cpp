@@ -26,13 +26,16 @@ constexpr int kEdgePixels = 2;
 namespace {
 /// The normals' cosine when a point (position, unit normal, material) lies on filterable pixel
 /// p's surface by the filter's tests, else -2.
+/// Whether a point (position, unit normal) lies on pixel p's plane: normals within 25 degrees,
+/// within kPlaneFootprints of p's footprints of its tangent plane.
+bool onPlane(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal) {
+  return glm::dot(in.normal[p], normal) >= kMinNormalCos &&
+         std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p];
+}
+
 float cosOnSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material) {
-  if (!in.filterable[p] || material != in.material[p]) return -2.0f;
-  const float c = glm::dot(in.normal[p], normal);
-  if (!(c >= kMinNormalCos) ||
-      !(std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p]))
-    return -2.0f;
-  return c;
+  if (!in.filterable[p] || material != in.material[p] || !onPlane(in, p, position, normal)) return -2.0f;
+  return glm::dot(in.normal[p], normal);
 }
 }  // namespace
 
@@ -167,9 +170,7 @@ std::vector<float> surfaceReach(const IndirectBuffer& in, int radius, float scal
         }
         between = 0;
         // The same surface whatever its material: on.
-        if (glm::dot(in.normal[p], in.normal[q]) >= kMinNormalCos &&
-            std::fabs(glm::dot(in.normal[p], in.position[q] - in.position[p])) <= kPlaneFootprints * in.footprint[p])
-          continue;
+        if (onPlane(in, p, in.position[q], in.normal[q])) continue;
         nearest = std::min(nearest, glm::length(in.position[q] - in.position[p]));
         break;
       }

@@ -42,9 +42,15 @@ void EmissionSample::set(int d, double v) {
   }
 }
 
+std::array<double, 12> EmissionGuide::unitBox() {
+  std::array<double, 12> box{};
+  for (int d = 0; d < EmissionSample::kDims; ++d) box[size_t(2 * d + 1)] = 1.0;
+  return box;
+}
+
 EmissionGuide::EmissionGuide() {
   Leaf l;
-  for (int d = 0; d < EmissionSample::kDims; ++d) l.box[size_t(2 * d + 1)] = 1.0;
+  l.box = unitBox();
   m_leaves.push_back(l);
   m_nodes.push_back(Node{-1, 0.0, 0});
   m_cdf.push_back(1.0);
@@ -81,7 +87,7 @@ EmissionGuide EmissionGuide::fromUseful(std::vector<Useful> useful, const std::v
   };
   std::vector<Task> stack;
   g.m_nodes.push_back(Node{});
-  stack.push_back({0, 0, useful.size(), EmissionGuide().m_leaves[0].box, 0});
+  stack.push_back({0, 0, useful.size(), unitBox(), 0});
   while (!stack.empty()) {
     const Task t = stack.back();
     stack.pop_back();

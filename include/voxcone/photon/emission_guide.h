@@ -102,6 +102,8 @@ public:
                            double& effectivePerPhoton);
 
 private:
+  /// [0, 1) in every dimension.
+  static std::array<double, 12> unitBox();
   struct Leaf {
     std::array<double, 12> box{};  ///< lo, hi per dimension
     double volume = 1.0;

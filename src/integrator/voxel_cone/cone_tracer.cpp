@@ -19,13 +19,23 @@
 
 namespace voxcone {
 
+namespace {
+/// Whether the lights a hit's shadow rays sample (all but the environment) are one point light or
+/// one sun without extent: every sample is then the same ray.
+bool onlyOneDeltaLight(const Scene& scene) {
+  if (scene.emissiveTriangleCount() > 0 || scene.pointLights.size() + scene.directionalLights.size() != 1) return false;
+  return scene.pointLights.size() == 1 || scene.directionalLights[0].isDelta();
+}
+}  // namespace
+
 ConeTracer::ConeTracer(const Scene& scene, const Accel& accel, const VoxelField& field, const VoxelConeSettings& s,
                        const PhotonRadiance* photons, const LightProximity* proximity)
     : m_scene(scene), m_accel(accel), m_field(field), m_photons(s.hitPhotons ? photons : nullptr),
       m_proximity(m_photons && proximity && !proximity->empty() ? proximity : nullptr),
       m_coneStep(s.coneStep), m_maxDistance(s.maxDistance), m_exactSegment(s.exactSegment),
       m_hitGather(s.hitGather), m_hitDirect(s.hitPhotons && s.hitDirect),
-      m_hitLightSamples(std::max(s.hitLightSamples, 1)), m_hitEnvironment(m_hitDirect && scene.environment) {
+      m_hitLightSamples(onlyOneDeltaLight(scene) ? 1 : std::max(s.hitLightSamples, 1)),
+      m_hitEnvironment(m_hitDirect && scene.environment) {
   const std::vector<int> levels = m_field.levels();
   if (levels.empty()) throw SettingsError("voxcone: the voxel field has no levels");
   m_finest = levels.front();

@@ -59,7 +59,8 @@ struct VoxelConeSettings {
   float maxDistance = 0.0f;     ///< world units; default the scene's bounding-sphere diameter
   int lightSamples = 1;         ///< shadow rays per shading point
   /// `hit_light_samples`: shadow rays to the lamps and suns at each cone's hit (with hit_direct =
-  /// "rays"), spread over the light's samples by an R2 sequence around the cone's own.
+  /// "rays"), spread over the light's samples by an R2 sequence around the cone's own; one where
+  /// the only such light is a point light or a sun without extent (every ray would be the same).
   int hitLightSamples = 4;
   int gathers = 1;              ///< gathering samples per gathering pixel (0: every sample)
   int filterRadius = 12;        ///< screen-space filter radius, pixels (0: off)
