@@ -32,7 +32,7 @@ struct PhotonList {
 }  // namespace voxel
 
 struct VoxelField::Impl {
-  using Grid = voxel::Grid;
+  using LevelStack = voxel::LevelStack;
   using FieldQuantization = voxel::FieldQuantization;
   using PhotonList = voxel::PhotonList;
 
@@ -41,7 +41,7 @@ struct VoxelField::Impl {
   DVec3 origin{0.0};
   Vec3 originF{0.0f};         ///< origin in float, for the cone lookups
   double extent = 0.0;        ///< side of the cube the grid covers, world units
-  Grid main, caustic;
+  LevelStack main, caustic;
   double surfaceArea = 0.0;   ///< world units^2, full precision sum at voxelization
   DVec3 injected{0.0}, dropped{0.0};
   uint64_t globalPhotons = 0, causticPhotons = 0;
@@ -52,7 +52,7 @@ struct VoxelField::Impl {
 
   double voxelSize(int level) const { return extent / double(uint64_t(1) << level); }
   /// Splat `photons` into the grid's finest level and turn their flux into radiance (inject.cpp).
-  void inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut);
+  void inject(LevelStack& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut);
 };
 
 }  // namespace voxcone

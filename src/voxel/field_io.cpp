@@ -10,11 +10,14 @@
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/io/io.h>
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
 #include <cstdio>
+#include <fstream>
 #include <cstdlib>
 #include <functional>
 #include <mutex>
@@ -39,39 +42,142 @@ openvdb::math::Transform::Ptr transformFor(const DVec3& origin, double voxelSize
   return xform;
 }
 
+/// A grid whose leaves hold only their active masks until the file asks for their values: the
+/// file writes every grid's topology first and then its leaves' values in the same order
+/// (Tree::writeBuffers, depth first), and here each leaf's values are made from the level when
+/// its turn comes, in a leaf of its own that is freed at once. A grid then costs its masks, not
+/// dense leaves: built whole, the dragon's level-10 grids took 1.5 GB of RSS to write (a Vec3s
+/// leaf is 6 KB for a surface through a few of its 512 voxels).
+template <typename GridT>
+class StreamedGrid final : public GridT {
+public:
+  using ValueT = typename GridT::ValueType;
+  using LeafT = typename GridT::TreeType::LeafNodeType;
+  using ValueFn = std::function<ValueT(const VoxelRef&)>;
+
+  /// The voxels of `lv` for which `all` or value(voxel) != background.
+  StreamedGrid(const Level& lv, ValueT background, bool all, ValueFn value)
+      : GridT(background), m_level(lv), m_value(std::move(value)) {
+    // The tree itself, not a ValueAccessor: an accessor caches a leaf's value buffer, and asking
+    // a partial leaf for it allocates it. Voxels come brick by brick, so the last leaf mostly
+    // holds the next voxel.
+    auto& tree = this->tree();
+    LeafT* leaf = nullptr;
+    constexpr int32_t kOrigin = ~int32_t(LeafT::DIM - 1);
+    lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
+      if (!all && m_value(r) == background) return;
+      const openvdb::Coord c{int32_t(i), int32_t(j), int32_t(k)};
+      const openvdb::Coord origin{c.x() & kOrigin, c.y() & kOrigin, c.z() & kOrigin};
+      if (!leaf || leaf->origin() != origin) leaf = tree.probeLeaf(origin);
+      if (!leaf) {
+        // No values yet (PartialCreate): writeBuffers makes them.
+        leaf = new LeafT(openvdb::PartialCreate(), origin, background, false);
+        tree.addLeaf(leaf);
+      }
+      leaf->setActiveState(LeafT::coordToOffset(c), true);
+    });
+  }
+
+  void writeBuffers(std::ostream& os) const override {
+    IndexAccessor index(*m_level.tree);
+    for (auto it = this->tree().cbeginLeaf(); it; ++it) {
+      LeafT leaf(it->origin(), this->background(), false);
+      for (auto on = it->getValueMask().beginOn(); on; ++on) {
+        const openvdb::Coord c = it->offsetToGlobalCoord(on.pos());
+        VoxelRef r{};
+        if (m_level.find(c.x(), c.y(), c.z(), index, r)) leaf.setValueOn(on.pos(), m_value(r));
+      }
+      leaf.writeBuffers(os, this->saveFloatAsHalf());
+    }
+  }
+
+private:
+  const Level& m_level;
+  ValueFn m_value;
+};
+
+/// Writes a .vdb as io::File::write does (the same header, file metadata, grid descriptors,
+/// topology and buffers), less the per-leaf delayed-load metadata that Archive::writeGrid adds
+/// (optional: readers without it read every leaf whole): making it reads every leaf's values
+/// before the grid is written, which would allocate StreamedGrid's leaves all at once.
+class FieldArchive final : public openvdb::io::Archive {
+public:
+  void write(std::ostream& os, const openvdb::GridCPtrVec& grids, const openvdb::MetaMap& metadata) const {
+    openvdb::io::StreamMetadata::Ptr fileMeta = openvdb::io::getStreamMetadataPtr(os);
+    if (!fileMeta) {
+      fileMeta = std::make_shared<openvdb::io::StreamMetadata>();
+      openvdb::io::setStreamMetadataPtr(os, fileMeta, /*transfer=*/false);
+    }
+    openvdb::io::setDataCompression(os, compression());
+    openvdb::io::setWriteGridStatsMetadata(os, false);
+    writeHeader(os, /*seekable=*/true);
+    metadata.writeMeta(os);
+    const int32_t count = int32_t(grids.size());
+    os.write(reinterpret_cast<const char*>(&count), sizeof count);
+    for (const openvdb::GridBase::ConstPtr& grid : grids) {
+      writeOne(os, *grid, fileMeta);
+      // Some compression options are set per grid: back to the file's for the next.
+      openvdb::io::setDataCompression(os, compression());
+    }
+  }
+
+private:
+  /// One grid (its name unique in the file), seekable: the descriptor, then the positions
+  /// written again once known.
+  void writeOne(std::ostream& os, const openvdb::GridBase& grid, const openvdb::io::StreamMetadata::Ptr& fileMeta) const {
+    auto gridMeta = std::make_shared<openvdb::io::StreamMetadata>(*fileMeta);
+    gridMeta->setHalfFloat(grid.saveFloatAsHalf());
+    gridMeta->gridMetadata() = static_cast<const openvdb::MetaMap&>(grid);
+    openvdb::io::StreamMetadata::Ptr current = gridMeta;
+    openvdb::io::setStreamMetadataPtr(os, current, /*transfer=*/false);
+    openvdb::io::GridDescriptor gd(grid.getName(), grid.type(), grid.saveFloatAsHalf());
+    gd.writeHeader(os);
+    const int64_t offsetPos = int64_t(os.tellp());
+    gd.writeStreamPos(os);  // a placeholder until the positions are known
+    gd.setGridPos(os.tellp());
+    setGridCompression(os, grid);
+    grid.writeMeta(os);
+    grid.writeTransform(os);
+    grid.writeTopology(os);
+    gd.setBlockPos(os.tellp());
+    grid.writeBuffers(os);
+    gd.setEndPos(os.tellp());
+    os.seekp(offsetPos, std::ios_base::beg);
+    gd.writeStreamPos(os);
+    gd.seekToEnd(os);
+    openvdb::io::StreamMetadata::Ptr file = fileMeta;
+    openvdb::io::setStreamMetadataPtr(os, file, /*transfer=*/false);
+  }
+};
+
 /// The grids of one level under `prefix` ("" for the main grid, "caustic_" for the caustic
 /// grid): coverage and normal of every voxel; each side's radiance, the diffuse fraction and the
 /// mips' axis fractions where they differ from their defaults (0, 1, none). Each is a task that
-/// builds it (write() runs them in parallel), in file order.
+/// builds its topology (write() runs them in parallel), in file order; the values are made as
+/// the file is written (StreamedGrid).
 using GridTask = std::function<openvdb::GridBase::Ptr()>;
 void addLevelGrids(const Level& lv, const DVec3& origin, bool finest, const std::string& prefix, std::vector<GridTask>& tasks) {
   const std::string l = "_L" + std::to_string(lv.level);
   const openvdb::math::Transform::Ptr xform = transformFor(origin, lv.voxelSize);
-  auto floatGrid = [&lv, xform, l, prefix](const std::string& name, float background, bool all, auto value) -> GridTask {
+  auto floatGrid = [&lv, xform, l, prefix](const std::string& name, float background, bool all,
+                                           std::function<float(const VoxelRef&)> value) -> GridTask {
     return [=, &lv]() -> openvdb::GridBase::Ptr {
-      auto grid = openvdb::FloatGrid::create(background);
+      auto grid = std::make_shared<StreamedGrid<openvdb::FloatGrid>>(lv, background, all, value);
       grid->setName(prefix + name + l);
       grid->setTransform(xform->copy());
       grid->setGridClass(openvdb::GRID_FOG_VOLUME);
-      auto acc = grid->getAccessor();
-      lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
-        const float v = value(r);
-        if (all || v != background) acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), v);
-      });
       return grid;
     };
   };
-  auto vecGrid = [&lv, xform, l, prefix](const std::string& name, bool all, auto value) -> GridTask {
+  auto vecGrid = [&lv, xform, l, prefix](const std::string& name, bool all, std::function<Vec3(const VoxelRef&)> value) -> GridTask {
     return [=, &lv]() -> openvdb::GridBase::Ptr {
-      auto grid = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+      auto toVdb = [value](const VoxelRef& r) {
+        const Vec3 x = value(r);
+        return openvdb::Vec3s(x.x, x.y, x.z);
+      };
+      auto grid = std::make_shared<StreamedGrid<openvdb::Vec3SGrid>>(lv, openvdb::Vec3s(0.0f), all, toVdb);
       grid->setName(prefix + name + l);
       grid->setTransform(xform->copy());
-      auto acc = grid->getAccessor();
-      lv.forEachVoxel([&](const VoxelRef& r, uint32_t i, uint32_t j, uint32_t k) {
-        const Vec3 x = value(r);
-        if (all || !isBlack(x))
-          acc.setValue(openvdb::Coord(int32_t(i), int32_t(j), int32_t(k)), openvdb::Vec3s(x.x, x.y, x.z));
-      });
       return grid;
     };
   };
@@ -200,9 +306,11 @@ void VoxelField::write(const std::string& path, const nlohmann::json& metadata) 
 
   writeFileAtomic(path, [&](const std::string& tmpPath) {
     try {
-      openvdb::io::File file(tmpPath);
-      file.write(grids, meta);
+      std::ofstream file(tmpPath, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+      if (!file) throw Error(path + ": cannot open for writing");
+      FieldArchive().write(file, openvdb::GridCPtrVec(grids.begin(), grids.end()), meta);
       file.close();
+      if (!file) throw Error(path + ": cannot write OpenVDB file");
     } catch (const openvdb::Exception& e) {
       throw Error(path + ": cannot write OpenVDB file: " + e.what());
     }
@@ -262,7 +370,7 @@ VoxelField VoxelField::read(const std::string& path) {
   } catch (const openvdb::Exception& e) {
     throw Error(path + ": cannot read OpenVDB file: " + e.what());
   }
-  for (Grid* grid : {&f.main, &f.caustic})
+  for (LevelStack* grid : {&f.main, &f.caustic})
     for (Level& lv : grid->levels)
       if (lv.level <= kConeTableLevel && lv.lit) lv.buildConeTable();
   return field;

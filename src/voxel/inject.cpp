@@ -176,7 +176,7 @@ Level keepLit(const Level& lv) {
 
 }  // namespace
 
-void VoxelField::Impl::inject(Grid& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut) {
+void VoxelField::Impl::inject(LevelStack& grid, const PhotonList& photons, Progress* progress, DVec3& injectedOut) {
   if (grid.empty()) return;
   Timer timer;
   Level& lv = grid.levels.front();

@@ -287,7 +287,7 @@ private:
 };
 
 /// A field's levels, finest first.
-struct Grid {
+struct LevelStack {
   std::vector<Level> levels;
   double injectSeconds = 0.0;
   bool empty() const { return levels.empty(); }

@@ -109,7 +109,7 @@ VoxelSample VoxelField::lookup(const Vec3& worldPos, int level) const {
 }
 
 VoxelSample VoxelField::sample(const Vec3& worldPos, float level) const {
-  const Grid& g = m_impl->main;
+  const LevelStack& g = m_impl->main;
   if (g.empty()) return {};
   const float finest = float(g.levels.front().level), coarsest = float(g.levels.back().level);
   const float l = std::clamp(level, coarsest, finest);
@@ -122,7 +122,7 @@ VoxelSample VoxelField::sample(const Vec3& worldPos, float level) const {
 }
 
 ConeSample VoxelField::coneSample(const Vec3& worldPos, float level, const Vec3& dir, const Vec3& apex) const {
-  const Grid& g = m_impl->main;
+  const LevelStack& g = m_impl->main;
   ConeSample out;
   if (g.empty()) return out;
   const float finest = float(g.levels.front().level), coarsest = float(g.levels.back().level);
@@ -138,7 +138,7 @@ ConeSample VoxelField::coneSample(const Vec3& worldPos, float level, const Vec3&
 }
 
 Vec3 VoxelField::causticRadiance(const Vec3& worldPos, const Vec3& viewFrom) const {
-  const Grid& g = m_impl->caustic;
+  const LevelStack& g = m_impl->caustic;
   if (g.empty()) return Vec3(0.0f);
   // The projected-area-weighted mean of the faces seen from viewFrom: the surface's caustic
   // radiance on the viewer's side, not faded by the trilinear weights of empty voxels around it.

@@ -94,7 +94,7 @@ VoxelField VoxelField::voxelize(const Scene& scene, const VoxelSettings& setting
   if (!(f.extent > 0.0)) throw SettingsError("cannot voxelize a scene of zero extent");
   f.bounds = Bounds3(Vec3(f.origin), Vec3(f.origin + DVec3(f.extent)));
 
-  auto build = [&](Grid& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
+  auto build = [&](LevelStack& grid, int level, bool countArea, const std::vector<uint64_t>* onlyBricks) {
     Timer timer;
     const double vs = f.voxelSize(level);
     LevelBuilder builder(level, vs, countArea ? f.quantPtr() : nullptr);
@@ -166,7 +166,7 @@ void VoxelField::inject(const PhotonMaps& photons, Progress* progress) {
 
 void VoxelField::buildMips(Progress* progress) {
   Impl& f = *m_impl;
-  for (Grid* grid : {&f.main}) {
+  for (LevelStack* grid : {&f.main}) {
     if (grid->empty()) continue;
     grid->levels.resize(1);
     if (progress) progress->start("mips", uint64_t(grid->levels.front().level - f.settings.coarsestLevel));
@@ -181,7 +181,7 @@ void VoxelField::buildMips(Progress* progress) {
     if (progress) progress->finish();
   }
   // Radiance is final now: decode what the cone lookups read, at the coarser levels.
-  for (Grid* grid : {&f.main, &f.caustic})
+  for (LevelStack* grid : {&f.main, &f.caustic})
     for (Level& lv : grid->levels)
       if (lv.level <= kConeTableLevel) lv.buildConeTable();
 }
