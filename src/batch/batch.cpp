@@ -5,6 +5,7 @@
 
 #include "voxcone/batch/process.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/file_io.h"
 #include "voxcone/core/progress.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/image/image_io.h"

@@ -3,6 +3,7 @@
 #include "voxcone/batch/study.h"
 
 #include "voxcone/core/error.h"
+#include "voxcone/core/file_io.h"
 #include "voxcone/image/image_io.h"
 
 #include <algorithm>
@@ -63,7 +64,7 @@ nlohmann::json sweepManifest(const SweepSettings& o) {
             // render --target-error / --time-budget: where its choices land against the fronts.
             {{"method", "voxcone"}, {"target_error", {0.002, 0.001, 0.0008}}},
             {{"method", "voxcone"}, {"time_budget", {0.5, 1, 2, 5}}}};
-    // The fair race (README: the fair race): both denoised, over spp; voxcone also with the
+    // The fair race (docs/method.md: the fair race): both denoised, over spp; voxcone also with the
     // photons it takes without the denoiser (four times its denoised default).
     if (o.denoise) {
       grid.push_back({{"method", "path"}, {"spp", {1, 2, 4, 8, 16, 64}}, {"denoise", true}});

@@ -7,12 +7,12 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/batch/process.h"
 #include "voxcone/core/error.h"
-#include "voxcone/core/hash.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/core/timer.h"
 #include "voxcone/image/image_io.h"
-#include "voxcone/integrator/auto_settings.h"
 #include "voxcone/integrator/integrator.h"
+#include "voxcone/integrator/progressive.h"
+#include "voxcone/integrator/sidecar.h"
 
 #include <nlohmann/json.hpp>
 #include <tbb/task_group.h>
@@ -82,35 +82,38 @@ void checkOutputsWritable(const std::filesystem::path& out) {
   std::filesystem::remove(probe, ec);
 }
 
-void runRender(const RenderOptions& o) {
-  Timer total;
-  ThreadLimit threads(o.threads);
-  ConsoleProgress progress(o.quiet);
+/// The scene a render reads, with what its sidecar records of it.
+struct LoadedScene {
+  Scene scene;
+  std::string name;       ///< the file's stem, or the built-in scene's name
+  double seconds = 0.0;   ///< reading it
+  nlohmann::json inputs;  ///< sidecarInputs
+};
 
+/// The scene of `o` (the built-in cornell-box where none is given), its input files hashed as
+/// they were read.
+LoadedScene loadRenderScene(const RenderOptions& o) {
   Timer t;
-  const std::string sceneName =
-      o.scenePath.empty() ? std::string(kDefaultSceneName) : std::filesystem::path(o.scenePath).stem().string();
   if (o.scenePath.empty() && !o.defines.empty())
     throw SettingsError("-D sets parameters of a Mitsuba XML scene; none is given");
-  Scene scene = o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
-                                          : loadScene(o.scenePath, parseDefines(o.defines));
-  const double loadSec = t.seconds();
+  LoadedScene s{o.scenePath.empty() ? parseScene(kDefaultSceneJson, "cornell-box (built-in)", ".")
+                                    : loadScene(o.scenePath, parseDefines(o.defines)),
+                o.scenePath.empty() ? std::string(kDefaultSceneName) : std::filesystem::path(o.scenePath).stem().string(),
+                0.0, nullptr};
+  s.seconds = t.seconds();
   // What the image was made from, hashed as it was read (xxhsum -H2 checks a file against it).
-  nlohmann::json inputs = nlohmann::json::array();
-  for (size_t i = 0; i < scene.inputFiles.size(); ++i) {
-    const std::string& f = scene.inputFiles[i];
-    uint64_t bytes = 0;
-    const std::string hash = fileXxh128(f, &bytes);
-    const std::string ext = std::filesystem::path(f).extension().string();
-    inputs.push_back({{"role", i == 0 ? "scene" : ext == ".ply" || ext == ".obj" ? "mesh" : "include"},
-                      {"path", std::filesystem::absolute(f).lexically_normal().string()},
-                      {"bytes", bytes},
-                      {"xxh128", hash}});
-  }
+  s.inputs = sidecarInputs(s.scene.inputFiles);
+  return s;
+}
 
+/// Whether `o` asks for a progressive render (--target-error or --time-budget).
+bool isProgressive(const RenderOptions& o) { return o.targetError > 0.0 || o.timeBudget > 0.0; }
+
+/// The scene's render settings with `o`'s overrides, validated; the light sampler's options
+/// set on the scene as well.
+RenderSettings renderSettings(const RenderOptions& o, Scene& scene) {
   RenderSettings settings = scene.render;
-  const bool autoSettings = o.targetError > 0.0 || o.timeBudget > 0.0;
-  if (autoSettings) {
+  if (isProgressive(o)) {
     if (!o.method.empty() && o.method != "voxcone")
       throw SettingsError("--target-error and --time-budget choose voxcone's settings; --method " + o.method +
                           " has none to choose");
@@ -131,35 +134,48 @@ void runRender(const RenderOptions& o) {
     scene.setLightSplit(settings.lightSplitDeg);
   }
   settings.validate();
+  return settings;
+}
+
+/// --denoise: the denoiser, and the AOV layers rendered only for it (not written).
+struct DenoiseSetup {
+  std::optional<LoadedDenoiser> denoiser;
+  std::vector<Aov> onlyLayers;
+};
+
+/// The AOV layers `o` asks for, and with --denoise the first hit's albedo and normal the
+/// network takes (written only where --aov asks for them). The denoiser's weights are read
+/// here, before any work is done; `settings` records the denoising.
+AovRequest aovRequest(const RenderOptions& o, RenderSettings& settings, DenoiseSetup& denoise) {
   AovRequest aovs;
   if (!o.aovs.empty()) {
     aovs.layers = parseAovs(o.aovs);
-    if (autoSettings) throw SettingsError("--aov with --target-error / --time-budget: the passes are averaged images, not layers");
+    if (isProgressive(o)) throw SettingsError("--aov with --target-error / --time-budget: the passes are averaged images, not layers");
   }
-  // --denoise: the network takes the first hit's albedo and normal, rendered as AOV layers
-  // (written only where --aov asks for them). Its weights are read before any work is done.
-  std::optional<LoadedDenoiser> denoiser;
-  std::vector<Aov> denoiseOnlyLayers;
   if (o.denoise) {
-    if (autoSettings) throw SettingsError("--denoise with --target-error / --time-budget is not supported");
-    denoiser = loadDenoiser(true, true, o.denoiseWeights);
+    if (isProgressive(o)) throw SettingsError("--denoise with --target-error / --time-budget is not supported");
+    denoise.denoiser = loadDenoiser(true, true, o.denoiseWeights);
     settings.denoise = true;
     for (Aov a : {Aov::Albedo, Aov::Normal})
       if (std::find(aovs.layers.begin(), aovs.layers.end(), a) == aovs.layers.end()) {
         aovs.layers.push_back(a);
-        denoiseOnlyLayers.push_back(a);
+        denoise.onlyLayers.push_back(a);
       }
   } else if (!o.denoiseWeights.empty()) {
     throw SettingsError("--denoise-weights without --denoise");
   }
+  return aovs;
+}
 
+/// The integrator's options: --options, with --field and --memory-budget-mb (voxcone options,
+/// voxel_cone.h, with a flag of their own).
+nlohmann::json integratorOptions(const RenderOptions& o, const RenderSettings& settings) {
   nlohmann::json options;
   try {
     options = nlohmann::json::parse(o.integratorOptions);
   } catch (const nlohmann::json::parse_error&) {
     throw SettingsError("--options is not valid JSON: " + o.integratorOptions);
   }
-  // --field and --memory-budget-mb are voxcone options (voxel_cone.h) with a flag of their own.
   for (const auto& [flag, key, given] :
        {std::tuple<const char*, const char*, bool>{"--field", "field", !o.field.empty()},
         {"--memory-budget-mb", "memory_budget_mb", o.memoryBudgetMb >= 0.0}}) {
@@ -169,18 +185,20 @@ void runRender(const RenderOptions& o) {
       throw SettingsError(std::string(flag) + " and --options' \"" + key + "\" both given");
   }
   if (!o.field.empty()) {
-    if (autoSettings)
+    if (isProgressive(o))
       throw SettingsError("--field renders with the field's photons; --target-error and --time-budget trace new photons "
                           "for every pass");
     if (!std::filesystem::is_regular_file(o.field)) throw SettingsError("--field: no such file: " + o.field);
     options["field"] = o.field;
   }
   if (o.memoryBudgetMb >= 0.0) options["memory_budget_mb"] = o.memoryBudgetMb;
+  return options;
+}
 
-  // Output paths: <stem>.exr, <stem>.png, <stem>.json next to each other.
-  std::filesystem::path out = o.output.empty()
-                                  ? std::filesystem::path("out") / sceneName
-                                  : std::filesystem::path(o.output);
+/// The output stem: <stem>.exr, <stem>.png and <stem>.json are written next to each other.
+/// Throws SettingsError where they could not all be written, or one would replace the scene.
+std::filesystem::path outputStem(const RenderOptions& o, const std::string& sceneName) {
+  std::filesystem::path out = o.output.empty() ? std::filesystem::path("out") / sceneName : std::filesystem::path(o.output);
   const std::string ext = out.extension().string();
   if (ext == ".exr" || ext == ".png" || ext == ".json") out.replace_extension();
   else if (!o.output.empty() && !ext.empty())
@@ -200,127 +218,98 @@ void runRender(const RenderOptions& o) {
   // Every output writable before any work is done (a read-only folder, a directory where a
   // file goes: found after the render, they left part of the set behind or wasted it).
   checkOutputsWritable(out);
+  return out;
+}
 
-  t.reset();
-  const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
-  const double buildSec = t.seconds();
-  aovs.accel = accel.get();
-
-  // --target-error / --time-budget: voxcone in averaged passes until the predicted error meets
-  // the target or the budget is spent (auto_settings.h).
-  nlohmann::json autoReport;
-  double pilotSec = 0.0, prepareSec = 0.0;
+/// A render's image and what made it.
+struct RenderRun {
   std::unique_ptr<Integrator> integrator;
   RenderResult result;
-  if (autoSettings) {
-    ProgressiveRequest request;
-    request.targetRelMse = o.targetError;
-    request.timeBudget = o.timeBudget > 0.0 ? std::max(1e-3, o.timeBudget - total.seconds()) : 0.0;
-    request.options = options;
-    if (o.spp != 0) request.passSpp = o.spp;
-    ProgressiveResult chosen = renderVoxconeToTarget(scene, *accel, settings, request, &progress);
-    settings.spp = chosen.passes * request.passSpp;
-    pilotSec = chosen.controlSeconds;
-    prepareSec = chosen.prepareSeconds;
-    autoReport = chosen.report;
-    integrator = std::move(chosen.integrator);
-    result = std::move(chosen.result);
-    if (!o.quiet) {
-      std::printf("%s", chosen.summary.c_str());
-      std::fflush(stdout);
-    }
-  } else {
-    IntegratorContext ctx{scene, *accel, settings, options};
-    integrator = createIntegrator(settings.method, ctx);
-    // Term layers need an integrator that separates them: known before anything is traced.
-    checkAovs(*integrator, aovs.layers);
-    t.reset();
-    integrator->prepare(&progress);
-    prepareSec = t.seconds();
-    result = renderImage(scene, *integrator, settings, &progress, o.writePartial, &aovs);
-  }
-  nlohmann::json denoiseReport;
-  if (denoiser) {
-    Timer td;
-    const auto layerImage = [&](Aov a) {
-      for (const ImageLayer& l : result.layers)
-        if (l.name == aovNames()[size_t(a)]) {
-          Image img(settings.width, settings.height);
-          for (size_t p = 0; p < img.pixels.size(); ++p)
-            for (int k = 0; k < 3; ++k) img.pixels[p][k] = l.values[p * 3 + size_t(k)];
-          return img;
-        }
-      throw Error("--denoise: the render has no " + aovNames()[size_t(a)] + " layer");
-    };
-    const Image albedo = layerImage(Aov::Albedo), normal = layerImage(Aov::Normal);
-    DenoiseTimings tm;
-    result.image = denoiser->denoiser.denoise(result.image, &albedo, &normal, &tm);
-    for (Aov a : denoiseOnlyLayers)
-      result.layers.erase(std::remove_if(result.layers.begin(), result.layers.end(),
-                                         [&](const ImageLayer& l) { return l.name == aovNames()[size_t(a)]; }),
-                          result.layers.end());
-    denoiseReport = {{"weights", std::filesystem::path(denoiser->weightsPath).filename().string()},
-                     {"seconds", td.seconds()}, {"input_seconds", tm.input}, {"network_seconds", tm.network},
-                     {"output_seconds", tm.output}};
-  }
-  // Interrupted with --write-partial: the image holds the passes that completed, written as a
-  // complete set that says so (sidecar "partial", EXR voxcone:partial, spp the samples taken).
-  const int requestedSpp = settings.spp;
-  if (result.partial) settings.spp = result.completedSpp;
+  double pilotSeconds = 0.0, prepareSeconds = 0.0;
+  nlohmann::json progressiveReport;  ///< null where not progressive
+};
 
-  nlohmann::json meta;
-  meta["voxcone_version"] = kVersion;
-  meta["scene"] = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName
-                                      : std::filesystem::absolute(o.scenePath).lexically_normal().string();
-  meta["command_line"] = commandLine();
-  meta["executable"] = selfExe();
-  meta["working_directory"] = std::filesystem::current_path().string();
-  meta["inputs"] = inputs;
-  meta["method"] = settings.method;
-  meta["settings"] = {{"width", settings.width}, {"height", settings.height}, {"spp", settings.spp},
-                      {"max_depth", settings.maxDepth}, {"seed", settings.seed},
-                      {"sampler", samplerNames()[size_t(settings.sampler)]},
-                      {"light_sampler", settings.lightTree ? "tree" : "power"},
-                      {"light_split", settings.lightTree ? settings.lightSplitDeg : 0.0f}, {"threads", threads.threads()},
-                      {"denoise", settings.denoise},
-                      {"integrator", integrator->settingsJson()}};
-  meta["seed"] = settings.seed;
-  if (!result.layers.empty()) {
-    nlohmann::json layers = nlohmann::json::object();
-    for (const ImageLayer& l : result.layers) layers[l.name] = l.channels;
-    meta["aovs"] = layers;
+/// --target-error / --time-budget: voxcone in averaged passes until the predicted error meets
+/// the target or the budget is spent (progressive.h). `settings.spp` becomes the passes'.
+RenderRun renderProgressively(const RenderOptions& o, const Scene& scene, const Accel& accel, RenderSettings& settings,
+                              const nlohmann::json& options, const Timer& total, Progress& progress) {
+  ProgressiveRequest request;
+  request.targetRelMse = o.targetError;
+  request.timeBudget = o.timeBudget > 0.0 ? std::max(1e-3, o.timeBudget - total.seconds()) : 0.0;
+  request.options = options;
+  if (o.spp != 0) request.passSpp = o.spp;
+  ProgressiveResult chosen = renderVoxconeToTarget(scene, accel, settings, request, &progress);
+  settings.spp = chosen.passes * request.passSpp;
+  RenderRun run;
+  run.pilotSeconds = chosen.controlSeconds;
+  run.prepareSeconds = chosen.prepareSeconds;
+  run.progressiveReport = chosen.report;
+  run.integrator = std::move(chosen.integrator);
+  run.result = std::move(chosen.result);
+  if (!o.quiet) {
+    std::printf("%s", chosen.summary.c_str());
+    std::fflush(stdout);
   }
-  if (result.partial) {
-    meta["partial"] = true;
-    meta["requested_spp"] = requestedSpp;
-  }
-  meta["timings"] = {{"load_seconds", loadSec}, {"build_seconds", buildSec}, {"pilot_seconds", pilotSec},
-                     {"prepare_seconds", prepareSec}, {"render_seconds", result.seconds},
-                     {"render_stage_seconds", result.stageSeconds}};
-  if (autoSettings) meta["auto"] = autoReport;
-  if (denoiser) {
-    meta["denoise"] = denoiseReport;
-    meta["timings"]["denoise_seconds"] = denoiseReport["seconds"];
-  }
-  meta["stats"] = {{"scene", scene.statsJson()}, {"accel", accel->statsJson()},
-                   {"integrator", integrator->statsJson()},
-                   {"samples", result.samples}, {"invalid_samples", result.invalidSamples},
-                   {"indirect_filter", result.filterStats}};
+  return run;
+}
 
+/// The integrator of `settings.method`, prepared, and its image.
+RenderRun renderOnce(const RenderOptions& o, const Scene& scene, const Accel& accel, const RenderSettings& settings,
+                     const nlohmann::json& options, const AovRequest& aovs, Progress& progress) {
+  RenderRun run;
+  IntegratorContext ctx{scene, accel, settings, options};
+  run.integrator = createIntegrator(settings.method, ctx);
+  // Term layers need an integrator that separates them: known before anything is traced.
+  checkAovs(*run.integrator, aovs.layers);
+  Timer t;
+  run.integrator->prepare(&progress);
+  run.prepareSeconds = t.seconds();
+  run.result = renderImage(scene, *run.integrator, settings, &progress, o.writePartial, &aovs);
+  return run;
+}
+
+/// The image through the denoiser, with the albedo and normal layers it takes; the layers
+/// rendered only for it removed. Its report for the sidecar.
+nlohmann::json denoiseImage(const DenoiseSetup& denoise, const RenderSettings& settings, RenderResult& result) {
+  Timer td;
+  const auto layerImage = [&](Aov a) {
+    for (const ImageLayer& l : result.layers)
+      if (l.name == aovNames()[size_t(a)]) {
+        Image img(settings.width, settings.height);
+        for (size_t p = 0; p < img.pixels.size(); ++p)
+          for (int k = 0; k < 3; ++k) img.pixels[p][k] = l.values[p * 3 + size_t(k)];
+        return img;
+      }
+    throw Error("--denoise: the render has no " + aovNames()[size_t(a)] + " layer");
+  };
+  const Image albedo = layerImage(Aov::Albedo), normal = layerImage(Aov::Normal);
+  DenoiseTimings tm;
+  result.image = denoise.denoiser->denoiser.denoise(result.image, &albedo, &normal, &tm);
+  for (Aov a : denoise.onlyLayers)
+    result.layers.erase(std::remove_if(result.layers.begin(), result.layers.end(),
+                                       [&](const ImageLayer& l) { return l.name == aovNames()[size_t(a)]; }),
+                        result.layers.end());
+  return {{"weights", std::filesystem::path(denoise.denoiser->weightsPath).filename().string()},
+          {"seconds", td.seconds()}, {"input_seconds", tm.input}, {"network_seconds", tm.network},
+          {"output_seconds", tm.output}};
+}
+
+/// Write <out>.exr, <out>.png and the sidecar <out>.json as a set (OutputSet): the EXR and the
+/// PNG to temporaries side by side (5 and 6.5 ms at 256x256, one after the other 11.5 ms of a
+/// 0.13 s render), then renamed together, the sidecar last (it marks a set complete: batch
+/// --skip-existing). Any failure leaves none of them. The sidecar gets the writing's record.
+void writeOutputs(const std::filesystem::path& out, const RenderResult& result, nlohmann::json& sidecar,
+                  const Timer& total) {
   const std::string exrPath = out.string() + ".exr", pngPath = out.string() + ".png", jsonPath = out.string() + ".json";
-  // The three files are a set (OutputSet): written to temporaries, the EXR and the PNG side by
-  // side (5 and 6.5 ms at 256x256, one after the other 11.5 ms of a 0.13 s render), then renamed
-  // together, the sidecar last (it marks a set complete: batch --skip-existing). Any failure
-  // leaves none of them.
   OutputSet files;
-  t.reset();
+  Timer t;
   double exrSec = 0.0;
   std::exception_ptr exrError, pngError;
   tbb::task_group writes;
   writes.run([&] {
     try {
       Timer te;
-      writeExr(exrPath, result.image, meta, &files, result.layers);
+      writeExr(exrPath, result.image, sidecar, &files, result.layers);
       exrSec = te.seconds();
     } catch (...) {
       exrError = std::current_exception();
@@ -328,40 +317,92 @@ void runRender(const RenderOptions& o) {
   });
   writes.run_and_wait([&] {
     try {
-      writePng(pngPath, result.image, &files, meta);
+      writePng(pngPath, result.image, &files, sidecar);
     } catch (...) {
       pngError = std::current_exception();
     }
   });
   if (exrError || pngError) std::rethrow_exception(exrError ? exrError : pngError);
-  meta["timings"]["write_seconds"] = t.seconds();
-  meta["timings"]["write_exr_seconds"] = exrSec;
-  meta["timings"]["total_seconds"] = total.seconds();
-  meta["peak_rss_bytes"] = peakRssBytes();
-  meta["outputs"] = {{"exr", exrPath}, {"png", pngPath}};
-  writeJsonAtomic(jsonPath, meta, &files);
+  addWrittenOutputs(sidecar, t.seconds(), exrSec, total.seconds(), exrPath, pngPath);
+  writeJsonAtomic(jsonPath, sidecar, &files);
   files.commit(jsonPath);
   std::printf("wrote %s (%s, %s)%s\n", exrPath.c_str(), pngPath.c_str(), jsonPath.c_str(),
               result.partial ? ", partial" : "");
+}
+
+/// Throws NotMetError where a progressive render's target or budget was not met (its image is
+/// written).
+void checkProgressiveMet(const RenderOptions& o, const nlohmann::json& report, const Timer& total) {
+  if (report.value("met", true)) return;
+  char what[256];
+  if (o.targetError > 0.0)
+    std::snprintf(what, sizeof what, "--target-error %.4g: predicted relMSE %.4g after %d passes (%s); the image is written",
+                  o.targetError, report.value("predicted_relmse", 0.0), report["chosen"].value("passes", 0),
+                  report.value("stopped_by", std::string()).c_str());
+  else
+    std::snprintf(what, sizeof what, "--time-budget %.3g s: took %.3g s for the 2 passes a prediction needs; the image is written",
+                  o.timeBudget, total.seconds());
+  throw NotMetError(what);
+}
+
+void runRender(const RenderOptions& o) {
+  Timer total;
+  ThreadLimit threads(o.threads);
+  ConsoleProgress progress(o.quiet);
+
+  // Parse and check everything before any work is done.
+  LoadedScene loaded = loadRenderScene(o);
+  Scene& scene = loaded.scene;
+  RenderSettings settings = renderSettings(o, scene);
+  DenoiseSetup denoise;
+  AovRequest aovs = aovRequest(o, settings, denoise);
+  const nlohmann::json options = integratorOptions(o, settings);
+  const std::filesystem::path out = outputStem(o, loaded.name);
+
+  Timer t;
+  const std::unique_ptr<Accel> accel = buildAccel(o.accel, scene, &progress);
+  const double buildSec = t.seconds();
+  aovs.accel = accel.get();
+
+  RenderRun run = isProgressive(o) ? renderProgressively(o, scene, *accel, settings, options, total, progress)
+                                   : renderOnce(o, scene, *accel, settings, options, aovs, progress);
+  RenderResult& result = run.result;
+  const nlohmann::json denoiseReport = denoise.denoiser ? denoiseImage(denoise, settings, result) : nlohmann::json();
+  // Interrupted with --write-partial: the image holds the passes that completed, written as a
+  // complete set that says so (sidecar "partial", EXR voxcone:partial, spp the samples taken).
+  const int requestedSpp = settings.spp;
+  if (result.partial) settings.spp = result.completedSpp;
+
+  RenderRecord record;
+  record.version = kVersion;
+  record.scene = o.scenePath.empty() ? std::string("built-in:") + kDefaultSceneName
+                                     : std::filesystem::absolute(o.scenePath).lexically_normal().string();
+  record.commandLine = commandLine();
+  record.executable = selfExe();
+  record.workingDirectory = std::filesystem::current_path().string();
+  record.inputs = loaded.inputs;
+  record.threads = threads.threads();
+  record.sceneData = &scene;
+  record.accel = accel.get();
+  record.integrator = run.integrator.get();
+  record.settings = settings;
+  record.requestedSpp = requestedSpp;
+  record.result = &result;
+  record.timings = {loaded.seconds, buildSec, run.pilotSeconds, run.prepareSeconds};
+  record.progressiveReport = run.progressiveReport;
+  record.denoiseReport = denoiseReport;
+  nlohmann::json sidecar = renderSidecar(record);
+  writeOutputs(out, result, sidecar, total);
+
   if (result.partial) {
     char what[512];
     std::snprintf(what, sizeof what, "wrote a partial image of %d of %d spp to %s", settings.spp, requestedSpp,
-                  exrPath.c_str());
+                  (out.string() + ".exr").c_str());
     throw CancelledError(what);
   }
   std::printf("%s: %dx%d, %d spp, %s, render %.2f s, total %.2f s\n", settings.method.c_str(), settings.width,
-              settings.height, settings.spp, sceneName.c_str(), result.seconds, total.seconds());
-  if (autoSettings && !autoReport.value("met", true)) {
-    char what[256];
-    if (o.targetError > 0.0)
-      std::snprintf(what, sizeof what, "--target-error %.4g: predicted relMSE %.4g after %d passes (%s); the image is written",
-                    o.targetError, autoReport.value("predicted_relmse", 0.0), autoReport["chosen"].value("passes", 0),
-                    autoReport.value("stopped_by", std::string()).c_str());
-    else
-      std::snprintf(what, sizeof what, "--time-budget %.3g s: took %.3g s for the 2 passes a prediction needs; the image is written",
-                    o.timeBudget, total.seconds());
-    throw NotMetError(what);
-  }
+              settings.height, settings.spp, loaded.name.c_str(), result.seconds, total.seconds());
+  if (isProgressive(o)) checkProgressiveMet(o, run.progressiveReport, total);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include "cli_util.h"
 #include "commands.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/file_io.h"
 #include "voxcone/image/image_io.h"
 
 #include <nlohmann/json.hpp>

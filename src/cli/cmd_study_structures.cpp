@@ -8,6 +8,7 @@
 #include "default_scene.h"
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
+#include "voxcone/core/file_io.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/image/image_io.h"
 #include "voxcone/image/metrics.h"

@@ -58,8 +58,8 @@ void runVoxelize(const VoxelizeOptions& o) {
 
   // Model no more than the scene needs: a caustic grid only where a specular surface can focus
   // light (L S+ D paths need a delta material). By default one level finer than the field, at
-  // most level 10 (0.55 mm voxels in the Cornell box): the caustic grid is voxelized over the
-  // whole scene before it is pruned to the lit voxels, so finer levels cost seconds.
+  // most level 10 (0.55 mm voxels in the Cornell box); it holds only the voxels the caustic
+  // photons reach (VoxelField::build, as a render's field).
   bool specular = false;
   for (const Material& m : scene.materials) specular = specular || m.hasDeltaLobe();
   const int causticLevel =
@@ -83,18 +83,12 @@ void runVoxelize(const VoxelizeOptions& o) {
   vs.measureQuantization = o.measureQuantization;
   // The estimate the budget is checked against, beside what the field turns out to take.
   const std::vector<FieldEstimate> estimates = VoxelField::estimate(scene, vs);
-  t.reset();
-  VoxelField field = VoxelField::voxelize(scene, vs, &progress);
-  const double voxelizeSec = t.seconds();
-  peakAfter["voxelize"] = peakRssBytes();
-  t.reset();
-  field.inject(maps, &progress);
-  const double injectSec = t.seconds();
-  peakAfter["inject"] = peakRssBytes();
-  t.reset();
-  field.buildMips(&progress);
-  const double mipSec = t.seconds();
-  peakAfter["mips"] = peakRssBytes();
+  VoxelField::BuildStats built;
+  VoxelField field = VoxelField::build(scene, vs, maps, maps, &progress, &built);
+  peakAfter["voxelize"] = built.peakAfterVoxelize;
+  peakAfter["inject"] = built.peakAfterInject;
+  peakAfter["mips"] = built.peakAfterMips;
+  const double voxelizeSec = built.voxelizeSeconds, injectSec = built.injectSeconds, mipSec = built.mipsSeconds;
 
   nlohmann::json j;
   j["scene"] = o.scenePath;

@@ -6,7 +6,7 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/sampling.h"
-#include "voxcone/integrator/whitted.h"
+#include "voxcone/integrator/direct_light.h"
 #include "voxcone/scene/bsdf.h"
 
 #include <chrono>

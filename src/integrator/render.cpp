@@ -1,7 +1,12 @@
+// The render driver (integrator.h renderImage): tiles of pixels in parallel, in passes without the
+// indirect filter, or with it in stages (samples, link, gathers, filter); and the samples of
+// chosen pixels (renderPixels).
+
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
 #include "voxcone/core/timer.h"
+#include "voxcone/image/film.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/integrator.h"
 
@@ -9,6 +14,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 
 namespace voxcone {
 
@@ -18,7 +24,10 @@ namespace {
 /// Measured (256x256 defaults): 0.9 instead leaves cornell-box at 38.28 dB (38.27) and lifts
 /// cornell-dragon from 39.00 to 39.32 dB, since most of the dragon's pixels span facets a few
 /// degrees apart; the stricter value is kept until the studies are re-run with it.
-constexpr float kSameSurfaceCos = 0.99f;
+constexpr float kOneSurfaceNormalCos = 0.99f;
+
+/// Pixels per side of the square tiles the pixels are rendered in, in parallel.
+constexpr int kTile = 16;
 
 /// A radiance estimate the image takes: finite and not negative.
 bool usableRadiance(const Vec3& v) { return isFinite(v) && v.x >= 0.0f && v.y >= 0.0f && v.z >= 0.0f; }
@@ -117,32 +126,29 @@ void runGathers(const Integrator& integrator, const std::vector<PendingGather>& 
   for (size_t p = 0; p < sum.size(); ++p) ib.indirect[p] += Vec3(sum[p] / double(spp));
 }
 
-/// Per-pixel sums of the AOV layers' channels (double, pixel-major, the layers in the order
-/// asked), one sample at a time, from the sample's camera ray and its RadianceTerms.
-class AovSums {
+/// The AOV layers' values of each sample, from the sample's camera ray and its RadianceTerms,
+/// added to a film's layers: the film's layer i is the request's layer i (aovFilmLayers).
+class AovSampler {
 public:
-  AovSums(const Scene& scene, const AovRequest* request, size_t pixels) : m_scene(scene) {
-    if (!request) return;
+  AovSampler(const Scene& scene, const AovRequest* request) : m_scene(scene) {
+    if (!request || request->layers.empty()) return;
     m_request = request;
     for (Aov a : request->layers) {
-      m_offsets.push_back(m_channels);
-      m_channels += aovChannels(a).size();
       m_firstHit = m_firstHit || !isTermAov(a);
       m_terms = m_terms || isTermAov(a);
     }
-    sums.assign(pixels * m_channels, 0.0);
   }
-  bool active() const { return m_channels > 0; }
+  /// Whether layers are asked for.
+  bool active() const { return m_request != nullptr; }
   /// Whether a term layer is asked for (samples then go through liTerms).
   bool terms() const { return m_terms; }
 
-  /// Add one sample of `pixel`.
-  void add(size_t pixel, const Ray& ray, const RadianceTerms& t) {
+  /// Add one sample of `pixel` to `film`.
+  void add(Film& film, size_t pixel, const Ray& ray, const RadianceTerms& t) const {
     SurfaceHit sh;
     const bool hit = m_firstHit && intersectSurface(m_scene, *m_request->accel, ray, sh);
-    double* out = &sums[pixel * m_channels];
     for (size_t i = 0; i < m_request->layers.size(); ++i) {
-      double* o = out + m_offsets[i];
+      double* o = film.layerSums(pixel, i);
       const auto put = [o](const Vec3& v) {
         o[0] += double(v.x);
         o[1] += double(v.y);
@@ -170,45 +176,27 @@ public:
     }
   }
 
-  /// Add `v` to `pixel`'s sums of layer `a`, where it is asked for.
-  void addTo(size_t pixel, Aov a, const DVec3& v) {
+  /// Add `v` to `pixel`'s sums of layer `a` in `film`, where it is asked for.
+  void addTo(Film& film, size_t pixel, Aov a, const DVec3& v) const {
     if (!active()) return;
     for (size_t i = 0; i < m_request->layers.size(); ++i)
       if (m_request->layers[i] == a)
-        for (int c = 0; c < 3; ++c) sums[pixel * m_channels + m_offsets[i] + size_t(c)] += v[c];
+        for (int c = 0; c < 3; ++c) film.layerSums(pixel, i)[c] += v[c];
   }
-
-  /// The layers: each sum over `spp` samples; `filtered`, when given, is each pixel's filtered
-  /// indirect light, added to the Indirect layer as renderImage adds it to the beauty.
-  std::vector<ImageLayer> layers(int spp, const std::vector<Vec3>* filtered = nullptr) const {
-    std::vector<ImageLayer> out;
-    if (!active()) return out;
-    const size_t pixels = sums.size() / m_channels;
-    for (size_t i = 0; i < m_request->layers.size(); ++i) {
-      const Aov a = m_request->layers[i];
-      ImageLayer l{aovNames()[size_t(a)], aovChannels(a), {}};
-      const size_t nc = l.channels.size();
-      l.values.resize(pixels * nc);
-      for (size_t p = 0; p < pixels; ++p)
-        for (size_t c = 0; c < nc; ++c) {
-          float v = float(sums[p * m_channels + m_offsets[i] + c] / double(spp));
-          if (a == Aov::Indirect && filtered) v += (*filtered)[p][int(c)];
-          l.values[p * nc + c] = v;
-        }
-      out.push_back(std::move(l));
-    }
-    return out;
-  }
-
-  std::vector<double> sums;
 
 private:
   const Scene& m_scene;
   const AovRequest* m_request = nullptr;
-  std::vector<size_t> m_offsets;
-  size_t m_channels = 0;
   bool m_firstHit = false, m_terms = false;
 };
+
+/// The film's layers for `request` (none without one), in the order asked.
+std::vector<FilmLayer> aovFilmLayers(const AovRequest* request) {
+  std::vector<FilmLayer> layers;
+  if (request)
+    for (Aov a : request->layers) layers.push_back({aovNames()[size_t(a)], aovChannels(a)});
+  return layers;
+}
 
 /// The pixels that take glint samples (Integrator::glintSamples): those whose probe rays (the
 /// centres of the pixel's 2 x 2 quarters) the integrator says may see glints vary
@@ -264,15 +252,31 @@ void leaveOutGlints(Vec3& L, RadianceTerms& terms) {
   terms.emitted -= terms.glint;
 }
 
-/// One sample's radiance: li, or with AOVs liTerms, whose terms and first hit go into `aovs`
-/// when the estimate is usable; without its glints where `glints` (glintSum takes them).
-Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, AovSums& aovs,
-                bool glints) {
+/// The glint samples a render takes (Integrator::glintSamples): how many per camera sample, and
+/// at which pixels (glintPixels; none where the integrator takes none).
+struct GlintPlan {
+  int perSample = 0;
+  std::vector<uint8_t> pixels;
+  /// Whether `pixel` takes glint samples (its camera samples then leave their glints out).
+  bool at(size_t pixel) const { return !pixels.empty() && pixels[pixel]; }
+};
+
+GlintPlan planGlints(const Scene& scene, const Integrator& integrator, int w, int h) {
+  GlintPlan plan;
+  plan.perSample = integrator.glintSamples();
+  if (plan.perSample > 0) plan.pixels = glintPixels(scene, integrator, w, h);
+  return plan;
+}
+
+/// One sample's radiance: li, or with AOVs liTerms, whose terms and first hit go into `film`'s
+/// layers when the estimate is usable; without its glints where `glints` (glintSum takes them).
+Vec3 takeSample(const Integrator& integrator, const Ray& ray, Sampler& sampler, size_t pixel, const AovSampler& aovs,
+                Film& film, bool glints) {
   if (!aovs.active() && !glints) return integrator.li(ray, sampler);
   RadianceTerms terms;
   Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, nullptr, terms) : integrator.li(ray, sampler);
   if (glints) leaveOutGlints(L, terms);
-  if (usableRadiance(L) && aovs.active()) aovs.add(pixel, ray, terms);
+  if (usableRadiance(L) && aovs.active()) aovs.add(film, pixel, ray, terms);
   return L;
 }
 
@@ -289,6 +293,32 @@ std::vector<int> passSizes(int spp) {
 }
 
 /// renderImage without the indirect filter, in passes over every pixel (passSizes). Each pixel
+
+/// Pixel (x, y)'s samples [first, first + count) added to `film` (and its glint samples for
+/// them, where it takes glint samples); unusable ones counted in `bad`.
+void samplePixelPass(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                     const GlintPlan& glints, const AovSampler& aovs, int x, int y, int first, int count, Film& film,
+                     uint64_t& bad) {
+  const int w = settings.width, h = settings.height;
+  const size_t pixel = size_t(y) * size_t(w) + size_t(x);
+  Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
+  const bool glint = glints.at(pixel);
+  for (int s = first; s < first + count; ++s) {
+    sampler.startSample(static_cast<uint32_t>(s));
+    const Vec2 jitter = sampler.uniform2();
+    const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
+    const Vec3 L = takeSample(integrator, ray, sampler, pixel, aovs, film, glint);
+    if (!usableRadiance(L)) ++bad;
+    else film.beauty(pixel) += DVec3(L);
+  }
+  if (glint) {
+    const DVec3 g = glintSum(scene, integrator, settings, x, y, glints.perSample, first, count, bad);
+    film.beauty(pixel) += g;
+    aovs.addTo(film, pixel, Aov::Emitted, g);
+  }
+}
+
+/// renderImage without the indirect filter, in passes over every pixel (passSizes). Each pixel
 /// sums its samples in sample order into one double sum whatever the passes, so the image is
 /// the one a single pass gives, bit for bit. Cancellation is checked at every pixel of every
 /// pass (a pixel's share of a pass is at most 64 samples: milliseconds), so a render stops
@@ -296,24 +326,20 @@ std::vector<int> passSizes(int spp) {
 /// completed as an image of fewer samples (RenderResult::partial), else throws CancelledError.
 RenderResult renderPasses(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
                           Progress* progress, bool keepPartial, const AovRequest* aovRequest) {
-  constexpr int kTile = 16;
   const int w = settings.width, h = settings.height;
   const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
-  const size_t n = size_t(w) * size_t(h);
-  std::vector<DVec3> sum(n, DVec3(0.0)), complete;  // complete: the sums after the last whole pass
-  AovSums aovs(scene, aovRequest, n);
-  std::vector<double> aovComplete;
+  Film film(w, h, aovFilmLayers(aovRequest));
+  const AovSampler aovs(scene, aovRequest);
   std::atomic<uint64_t> invalid{0};
-  uint64_t invalidComplete = 0;
+  uint64_t invalidComplete = 0;  // invalid after the last whole pass
   std::atomic<bool> cancelled{false};
   const std::vector<int> passes = passSizes(settings.spp);
   Timer timer;
-  const int glintPerSample = integrator.glintSamples();
-  const std::vector<uint8_t> glintPixel =
-      glintPerSample > 0 ? glintPixels(scene, integrator, w, h) : std::vector<uint8_t>();
+  const GlintPlan glints = planGlints(scene, integrator, w, h);
   if (progress) progress->start("render", uint64_t(tilesX) * uint64_t(tilesY) * passes.size());
   int doneSpp = 0;
   for (const int passSpp : passes) {
+    // One pass: every pixel's next passSpp samples, tile by tile in parallel.
     tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
       const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
       uint64_t bad = 0;
@@ -324,22 +350,7 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
             cancelled = true;
             return;
           }
-          const size_t pixel = size_t(y) * size_t(w) + size_t(x);
-          Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
-          const bool glints = !glintPixel.empty() && glintPixel[pixel];
-          for (int s = doneSpp; s < doneSpp + passSpp; ++s) {
-            sampler.startSample(static_cast<uint32_t>(s));
-            const Vec2 jitter = sampler.uniform2();
-            const Ray ray = scene.camera.generateRay(float(x) + jitter.x, float(y) + jitter.y, w, h);
-            const Vec3 L = takeSample(integrator, ray, sampler, pixel, aovs, glints);
-            if (!usableRadiance(L)) ++bad;
-            else sum[pixel] += DVec3(L);
-          }
-          if (glints) {
-            const DVec3 g = glintSum(scene, integrator, settings, x, y, glintPerSample, doneSpp, passSpp, bad);
-            sum[pixel] += g;
-            aovs.addTo(pixel, Aov::Emitted, g);
-          }
+          samplePixelPass(scene, integrator, settings, glints, aovs, x, y, doneSpp, passSpp, film, bad);
         }
       invalid += bad;
       if (progress) progress->advance(1);
@@ -347,88 +358,291 @@ RenderResult renderPasses(const Scene& scene, const Integrator& integrator, cons
     if (cancelled) break;
     doneSpp += passSpp;
     if (keepPartial && doneSpp < settings.spp) {
-      complete = sum;
-      aovComplete = aovs.sums;
+      film.keepComplete();
       invalidComplete = invalid;
     }
   }
   RenderResult result;
-  result.image = Image(w, h);
   result.completedSpp = doneSpp;
   if (cancelled) {
     if (!keepPartial || doneSpp == 0) throw CancelledError();
-    sum.swap(complete);
-    aovs.sums.swap(aovComplete);
+    film.restoreComplete();
     invalid = invalidComplete;
     result.partial = true;
   }
   if (progress) progress->finish();
-  for (size_t p = 0; p < n; ++p) result.image.pixels[p] = Vec3(sum[p] / double(doneSpp));
-  result.layers = aovs.layers(doneSpp);
+  result.image = film.image(doneSpp);
+  result.layers = film.layers(doneSpp);
   result.stageSeconds["samples"] = timer.seconds();
   result.seconds = timer.seconds();
-  result.samples = uint64_t(n) * uint64_t(doneSpp);
+  result.samples = uint64_t(w) * uint64_t(h) * uint64_t(doneSpp);
   result.invalidSamples = invalid;
   return result;
 }
+
+/// Which pixels run their deferred gathers, and which edge pixels take their indirect light
+/// from filter pixels instead (FilteredRender::planGathers).
+struct GatherPlan {
+  std::vector<uint8_t> gathers;   ///< per pixel: its deferred gathers run
+  std::vector<EdgeSample> edges;  ///< the samples of the pixels the filter does not take, in tile order
+  std::vector<int64_t> from;      ///< per edge sample: the filter pixel it borrows from (borrowFrom), or -1
+  std::vector<uint8_t> borrows;   ///< per pixel: its edge samples take their filter pixels' light
+  uint64_t unfilled = 0;          ///< pixels that gather because the filter cannot fill them
+  uint64_t borrowing = 0;         ///< pixels that borrow
+};
+
+/// renderImage with the indirect filter (Integrator::indirectFilterRadius > 0), in four
+/// stages: every pixel's samples in one pass, the indirect light of filterable first hits split
+/// off into the filter's buffer (samplePixels); which pixels run their deferred gathers and which
+/// edge pixels borrow their light (planGathers: "link"); the gathers ("gather"); the filter and
+/// the borrowed light added to the image ("filter").
+class FilteredRender {
+public:
+  FilteredRender(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
+                 Progress* progress, const AovRequest* aovRequest)
+      : m_scene(scene), m_integrator(integrator), m_settings(settings), m_progress(progress),
+        m_filterRadius(integrator.indirectFilterRadius()), m_w(settings.width), m_h(settings.height),
+        m_tilesX((m_w + kTile - 1) / kTile), m_tilesY((m_h + kTile - 1) / kTile),
+        m_film(m_w, m_h, aovFilmLayers(aovRequest)), m_aovs(scene, aovRequest),
+        m_tilePending(size_t(m_tilesX) * size_t(m_tilesY)), m_tileEdges(m_tilePending.size()) {
+    const size_t n = size_t(m_w) * size_t(m_h);
+    m_modulation.assign(n, Vec3(1.0f));
+    m_ib.width = m_w;
+    m_ib.height = m_h;
+    m_ib.indirect.assign(n, Vec3(0.0f));
+    m_ib.position.assign(n, Vec3(0.0f));
+    m_ib.normal.assign(n, Vec3(0.0f));
+    m_ib.material.assign(n, 0u);
+    m_ib.footprint.assign(n, 0.0f);
+    m_ib.filterable.assign(n, 0u);
+    // World-space width of a pixel per unit distance from the camera.
+    m_pixelAngle = 2.0f * std::tan(0.5f * scene.camera.fovYDeg() * kPi / 180.0f) / float(m_h);
+  }
+
+  RenderResult run() {
+    RenderResult result;
+    result.completedSpp = m_settings.spp;
+    Timer timer;
+    m_glints = planGlints(m_scene, m_integrator, m_w, m_h);
+    if (m_glints.perSample > 0) result.stageSeconds["glint_probe"] = timer.seconds();
+    samplePixels();
+    result.stageSeconds["samples"] = timer.seconds();
+    Timer stage;
+    const GatherPlan plan = planGathers();
+    result.stageSeconds["link"] = stage.seconds();
+    stage.reset();
+    runPlannedGathers(plan, result);
+    result.stageSeconds["gather"] = stage.seconds();
+    stage.reset();
+    filter(plan, result);
+    result.stageSeconds["filter"] = stage.seconds();
+    result.seconds = timer.seconds();
+    result.samples = static_cast<uint64_t>(m_w) * m_h * m_settings.spp;
+    result.invalidSamples = m_invalid;
+    return result;
+  }
+
+private:
+  /// Every pixel's samples, tile by tile in parallel. Throws CancelledError.
+  void samplePixels() {
+    std::atomic<bool> cancelled{false};
+    if (m_progress) m_progress->start("render", static_cast<uint64_t>(m_tilesX) * m_tilesY);
+    tbb::parallel_for(0, m_tilesX * m_tilesY, [&](int tile) {
+      if (cancelled.load(std::memory_order_relaxed)) return;
+      if (m_progress && m_progress->cancelled()) {
+        cancelled = true;
+        return;
+      }
+      const int x0 = (tile % m_tilesX) * kTile, y0 = (tile / m_tilesX) * kTile;
+      uint64_t bad = 0;
+      std::vector<EdgeSample> pixelSamples;
+      for (int y = y0; y < std::min(y0 + kTile, m_h); ++y)
+        for (int x = x0; x < std::min(x0 + kTile, m_w); ++x) {
+          // Checked at every pixel: a tile of many samples per pixel is seconds of work.
+          if (m_progress && m_progress->cancelled()) {
+            cancelled = true;
+            return;
+          }
+          samplePixel(tile, x, y, bad, pixelSamples);
+        }
+      m_invalid += bad;
+      if (m_progress) m_progress->advance(1);
+    });
+    if (cancelled) throw CancelledError();
+    if (m_progress) m_progress->finish();
+  }
+
+  /// Pixel (x, y)'s samples (of tile `tile`): all but their split-off indirect light into the
+  /// film; that light into the filter's buffer, or its deferred gathers into the tile's list;
+  /// where the samples saw one surface the pixel is the filter's, else its samples are edge
+  /// samples. Unusable samples counted in `bad`; `pixelSamples` is scratch space.
+  void samplePixel(int tile, int x, int y, uint64_t& bad, std::vector<EdgeSample>& pixelSamples) {
+    const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(m_w) + static_cast<size_t>(x);
+    Sampler sampler(m_settings.sampler, m_settings.seed, pixel, static_cast<uint32_t>(m_settings.spp));
+    // Sum in double so the mean does not depend on float rounding of a long sum.
+    DVec3 sum(0.0), indirectSum(0.0), positionSum(0.0), albedoSum(0.0);
+    int seen = 0;  // samples whose first hit split off its indirect light
+    bool oneSurface = true;
+    IndirectSplit first;
+    pixelSamples.clear();
+    // Glints from the glint samples: the camera samples leave theirs out.
+    const bool glints = m_glints.at(pixel);
+    for (int s = 0; s < m_settings.spp; ++s) {
+      sampler.startSample(static_cast<uint32_t>(s));
+      const Vec2 jitter = sampler.uniform2();
+      const Ray ray = m_scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, m_w, m_h);
+      IndirectSplit sp;
+      RadianceTerms terms;
+      Vec3 L = m_aovs.terms() || glints ? m_integrator.liTerms(ray, sampler, &sp, terms)
+                                        : m_integrator.liSplit(ray, sampler, sp);
+      if (glints) leaveOutGlints(L, terms);
+      if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
+        ++bad;
+        oneSurface = false;
+        continue;
+      }
+      if (m_aovs.active()) m_aovs.add(m_film, pixel, ray, terms);
+      sum += DVec3(L);
+      if (!sp.valid) {
+        oneSurface = false;
+        continue;
+      }
+      if (sp.deferred) m_tilePending[size_t(tile)].push_back({pixel, sp.gather});
+      else indirectSum += DVec3(sp.indirect);
+      positionSum += DVec3(sp.position);
+      albedoSum += DVec3(sp.albedo);
+      pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material, sp.albedo});
+      if (seen++ == 0) first = sp;
+      else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kOneSurfaceNormalCos) oneSurface = false;
+    }
+    if (glints) {
+      const DVec3 g = glintSum(m_scene, m_integrator, m_settings, x, y, m_glints.perSample, 0, m_settings.spp, bad);
+      sum += g;
+      m_aovs.addTo(m_film, pixel, Aov::Emitted, g);
+    }
+    // All but the split-off indirect light now, that after the filter.
+    m_film.beauty(pixel) = sum;
+    const DVec3 spp(m_settings.spp);
+    m_ib.indirect[pixel] = Vec3(indirectSum / spp);
+    if (seen > 0) m_modulation[pixel] = Vec3(albedoSum / double(seen));
+    if (seen > 0 && oneSurface) {
+      m_ib.position[pixel] = Vec3(positionSum / double(seen));
+      m_ib.normal[pixel] = first.normal;
+      m_ib.material[pixel] = first.material;
+      m_ib.footprint[pixel] = std::max(1e-30f, m_pixelAngle * glm::length(m_ib.position[pixel] - m_scene.camera.position()));
+      m_ib.filterable[pixel] = 1u;
+    } else if (seen > 0) {
+      m_tileEdges[size_t(tile)].insert(m_tileEdges[size_t(tile)].end(), pixelSamples.begin(), pixelSamples.end());
+    }
+  }
+
+  /// Which pixels run their deferred gathers and which borrow; the filter's links
+  /// (Integrator::linkIndirect) and its estimated pixels set in the buffer.
+  GatherPlan planGathers() {
+    GatherPlan plan;
+    // Which pixels run their deferred gathers: one per block on the filter's surfaces, every
+    // pixel off them (the filter keeps those as they are), and any the filter cannot fill.
+    const int spacing = std::max(1, m_integrator.gatherSpacing());
+    plan.gathers.assign(size_t(m_w) * size_t(m_h), 1u);
+    m_ib.estimated.assign(plan.gathers.size(), 1u);
+    for (int y = 0; y < m_h; ++y)
+      for (int x = 0; x < m_w; ++x) {
+        const size_t p = size_t(y) * size_t(m_w) + size_t(x);
+        if (m_ib.filterable[p] && !gathersInBlock(x, y, spacing, m_settings.seed)) plan.gathers[p] = m_ib.estimated[p] = 0u;
+      }
+    m_integrator.linkIndirect(m_ib);
+    if (spacing > 1) {
+      const std::vector<uint8_t> unfilled = unfilledPixels(m_ib, m_filterRadius);
+      for (size_t p = 0; p < unfilled.size(); ++p)
+        if (unfilled[p]) {
+          plan.gathers[p] = m_ib.estimated[p] = 1u;
+          ++plan.unfilled;
+        }
+    }
+    // Pixels the filter does not take: where each of their samples on a filterable surface
+    // finds a filter pixel of that surface nearby, the sample takes that pixel's filtered light
+    // and the pixel gathers nothing; any sample without one and the pixel gathers as before.
+    for (const std::vector<EdgeSample>& t : m_tileEdges) plan.edges.insert(plan.edges.end(), t.begin(), t.end());
+    m_tileEdges = {};
+    plan.from = borrowFrom(m_integrator, m_ib, plan.edges);
+    plan.borrows.assign(plan.gathers.size(), 0u);
+    for (size_t i = 0; i < plan.edges.size(); ++i) plan.borrows[plan.edges[i].pixel] = 1u;
+    for (size_t i = 0; i < plan.edges.size(); ++i)
+      if (plan.from[i] < 0) plan.borrows[plan.edges[i].pixel] = 0u;
+    for (size_t p = 0; p < plan.gathers.size(); ++p)
+      if (plan.borrows[p]) {
+        plan.gathers[p] = 0u;
+        ++plan.borrowing;
+      }
+    return plan;
+  }
+
+  /// The deferred gathers of the pixels `plan` says gather, in tile order, added to the
+  /// filter's buffer; the filter's statistics into `result`.
+  void runPlannedGathers(const GatherPlan& plan, RenderResult& result) {
+    std::vector<PendingGather> pending;
+    for (std::vector<PendingGather>& t : m_tilePending) {
+      for (const PendingGather& g : t)
+        if (plan.gathers[g.pixel]) pending.push_back(g);
+      std::vector<PendingGather>().swap(t);
+    }
+    uint64_t filterable = 0, gathering = 0;
+    for (size_t p = 0; p < plan.gathers.size(); ++p) {
+      filterable += m_ib.filterable[p];
+      gathering += plan.gathers[p];
+    }
+    const uint64_t gathersRun = pending.size();
+    result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", plan.unfilled},
+                          {"borrowing", plan.borrowing}, {"gathers", gathersRun}};
+    uint64_t bad = 0;
+    runGathers(m_integrator, pending, m_settings.spp, m_ib, bad, m_progress);
+    m_invalid += bad;
+  }
+
+  /// The filtered indirect light (borrowed where `plan` says so) added to the film's image,
+  /// and to its Indirect layer; both into `result`.
+  void filter(const GatherPlan& plan, RenderResult& result) const {
+    std::vector<Vec3> indirect = filterIndirect(m_ib, m_filterRadius);
+    // The borrowing pixels: each sample's share of its filter pixel's light, in sample order.
+    std::vector<DVec3> borrowed(indirect.size(), DVec3(0.0));
+    for (size_t i = 0; i < plan.edges.size(); ++i)
+      if (plan.borrows[plan.edges[i].pixel])
+        borrowed[plan.edges[i].pixel] += DVec3(indirect[size_t(plan.from[i])] * plan.edges[i].albedo);
+    for (size_t p = 0; p < indirect.size(); ++p)
+      indirect[p] = plan.borrows[p] ? Vec3(borrowed[p] / double(m_settings.spp)) : indirect[p] * m_modulation[p];
+    result.image = m_film.image(m_settings.spp);
+    for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
+    result.layers = m_film.layers(m_settings.spp);
+    // The Indirect layer holds the filtered light, as the image does.
+    for (ImageLayer& l : result.layers)
+      if (l.name == aovNames()[size_t(Aov::Indirect)])
+        for (size_t p = 0; p < indirect.size(); ++p)
+          for (int c = 0; c < 3; ++c) l.values[p * 3 + size_t(c)] += indirect[p][c];
+  }
+
+  const Scene& m_scene;
+  const Integrator& m_integrator;
+  const RenderSettings& m_settings;
+  Progress* m_progress;
+  const int m_filterRadius;
+  const int m_w, m_h, m_tilesX, m_tilesY;
+  Film m_film;
+  const AovSampler m_aovs;
+  GlintPlan m_glints;
+  IndirectBuffer m_ib;
+  std::vector<Vec3> m_modulation;  ///< per pixel, the mean IndirectSplit::albedo of its samples: the filtered light's factor
+  float m_pixelAngle = 0.0f;       ///< world-space width of a pixel per unit distance from the camera
+  std::vector<std::vector<PendingGather>> m_tilePending;  ///< per tile, the gathers its samples deferred
+  std::vector<std::vector<EdgeSample>> m_tileEdges;      ///< per tile, its edge samples
+  std::atomic<uint64_t> m_invalid{0};
+};
+
 }  // namespace
 
 void Integrator::linkIndirect(IndirectBuffer& buffer) const { buffer.link.assign(buffer.indirect.size(), 0u); }
 
 Vec3 Integrator::liTerms(const Ray&, Sampler&, IndirectSplit*, RadianceTerms&) const {
   throw Error(name() + " does not separate its terms");
-}
-
-const std::vector<std::string>& aovNames() {
-  static const std::vector<std::string> names = {"albedo", "normal", "depth", "emitted", "direct", "indirect", "caustic"};
-  return names;
-}
-
-std::vector<Aov> parseAovs(const std::string& list) {
-  std::vector<Aov> out;
-  size_t start = 0;
-  while (start <= list.size()) {
-    const size_t end = std::min(list.find(',', start), list.size());
-    const std::string name = list.substr(start, end - start);
-    const auto& names = aovNames();
-    const auto it = std::find(names.begin(), names.end(), name);
-    if (it == names.end()) {
-      std::string known;
-      for (const std::string& n : names) known += (known.empty() ? "" : ", ") + n;
-      throw SettingsError("--aov: unknown layer '" + name + "' (known: " + known + ")");
-    }
-    const Aov a = Aov(it - names.begin());
-    if (std::find(out.begin(), out.end(), a) != out.end()) throw SettingsError("--aov: " + name + " given twice");
-    out.push_back(a);
-    start = end + 1;
-  }
-  return out;
-}
-
-std::vector<std::string> aovChannels(Aov aov) {
-  const auto rgb = [](const std::string& layer) {
-    return std::vector<std::string>{layer + ".R", layer + ".G", layer + ".B"};
-  };
-  switch (aov) {
-    case Aov::Albedo: return rgb("Albedo");
-    case Aov::Normal: return {"Ns.X", "Ns.Y", "Ns.Z"};
-    case Aov::Depth: return {"Z"};
-    case Aov::Emitted: return rgb("Emitted");
-    case Aov::Direct: return rgb("Direct");
-    case Aov::Indirect: return rgb("Indirect");
-    case Aov::Caustic: return rgb("Caustic");
-  }
-  return {};
-}
-
-bool isTermAov(Aov aov) { return aov != Aov::Albedo && aov != Aov::Normal && aov != Aov::Depth; }
-
-void checkAovs(const Integrator& integrator, const std::vector<Aov>& layers) {
-  if (integrator.separatesTerms()) return;
-  for (Aov a : layers)
-    if (isTermAov(a))
-      throw SettingsError("--aov " + aovNames()[size_t(a)] + ": method " + integrator.name() +
-                          " does not separate its terms (path, whitted and voxcone do)");
 }
 
 RenderResult renderImage(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
@@ -439,200 +653,9 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     if (!aovRequest->accel) throw Error("renderImage: AOVs without an accelerator");
     checkAovs(integrator, aovRequest->layers);
   }
-  const int filterRadius = integrator.indirectFilterRadius();
-  const bool split = filterRadius > 0;
-  if (!split) return renderPasses(scene, integrator, settings, progress, keepPartial, aovRequest);
-  constexpr int kTile = 16;
-  const int w = settings.width, h = settings.height;
-  const int tilesX = (w + kTile - 1) / kTile, tilesY = (h + kTile - 1) / kTile;
-  RenderResult result;
-  result.completedSpp = settings.spp;
-  result.image = Image(w, h);
-  IndirectBuffer ib;
-  // Per pixel, the mean IndirectSplit::albedo of its samples: the filtered light's factor.
-  std::vector<Vec3> modulation;
-  if (split) {
-    const size_t n = size_t(w) * size_t(h);
-    modulation.assign(n, Vec3(1.0f));
-    ib.width = w;
-    ib.height = h;
-    ib.indirect.assign(n, Vec3(0.0f));
-    ib.position.assign(n, Vec3(0.0f));
-    ib.normal.assign(n, Vec3(0.0f));
-    ib.material.assign(n, 0u);
-    ib.footprint.assign(n, 0.0f);
-    ib.filterable.assign(n, 0u);
-  }
-  // World-space width of a pixel per unit distance from the camera.
-  const float pixelAngle = 2.0f * std::tan(0.5f * scene.camera.fovYDeg() * kPi / 180.0f) / float(h);
-  std::vector<std::vector<PendingGather>> tilePending(size_t(tilesX) * size_t(tilesY));
-  std::vector<std::vector<EdgeSample>> tileEdges(tilePending.size());
-  std::atomic<uint64_t> invalid{0};
-  std::atomic<bool> cancelled{false};
-  AovSums aovs(scene, aovRequest, size_t(w) * size_t(h));
-  Timer timer;
-  const int glintPerSample = integrator.glintSamples();
-  const std::vector<uint8_t> glintPixel =
-      glintPerSample > 0 ? glintPixels(scene, integrator, w, h) : std::vector<uint8_t>();
-  if (glintPerSample > 0) result.stageSeconds["glint_probe"] = timer.seconds();
-  if (progress) progress->start("render", static_cast<uint64_t>(tilesX) * tilesY);
-  tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
-    if (cancelled.load(std::memory_order_relaxed)) return;
-    if (progress && progress->cancelled()) {
-      cancelled = true;
-      return;
-    }
-    const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
-    uint64_t bad = 0;
-    std::vector<EdgeSample> pixelSamples;
-    for (int y = y0; y < std::min(y0 + kTile, h); ++y)
-      for (int x = x0; x < std::min(x0 + kTile, w); ++x) {
-        // Checked at every pixel: a tile of many samples per pixel is seconds of work.
-        if (progress && progress->cancelled()) {
-          cancelled = true;
-          return;
-        }
-        const size_t pixel = static_cast<size_t>(y) * static_cast<size_t>(w) + static_cast<size_t>(x);
-        Sampler sampler(settings.sampler, settings.seed, pixel, static_cast<uint32_t>(settings.spp));
-        // Sum in double so the mean does not depend on float rounding of a long sum.
-        DVec3 sum(0.0), indirectSum(0.0), positionSum(0.0), albedoSum(0.0);
-        int seen = 0;  // samples whose first hit split off its indirect light
-        bool oneSurface = true;
-        IndirectSplit first;
-        pixelSamples.clear();
-        // Glints from the glint samples: the camera samples leave theirs out.
-        const bool glints = !glintPixel.empty() && glintPixel[pixel];
-        for (int s = 0; s < settings.spp; ++s) {
-          sampler.startSample(static_cast<uint32_t>(s));
-          const Vec2 jitter = sampler.uniform2();
-          const Ray ray = scene.camera.generateRay(static_cast<float>(x) + jitter.x, static_cast<float>(y) + jitter.y, w, h);
-          IndirectSplit sp;
-          RadianceTerms terms;
-          Vec3 L = aovs.terms() || glints ? integrator.liTerms(ray, sampler, &sp, terms)
-                                          : integrator.liSplit(ray, sampler, sp);
-          if (glints) leaveOutGlints(L, terms);
-          if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
-            ++bad;
-            oneSurface = false;
-            continue;
-          }
-          if (aovs.active()) aovs.add(pixel, ray, terms);
-          sum += DVec3(L);
-          if (!sp.valid) {
-            oneSurface = false;
-            continue;
-          }
-          if (sp.deferred) tilePending[size_t(tile)].push_back({pixel, sp.gather});
-          else indirectSum += DVec3(sp.indirect);
-          positionSum += DVec3(sp.position);
-          albedoSum += DVec3(sp.albedo);
-          pixelSamples.push_back({pixel, sp.position, sp.normal, sp.material, sp.albedo});
-          if (seen++ == 0) first = sp;
-          else if (sp.material != first.material || glm::dot(sp.normal, first.normal) < kSameSurfaceCos) oneSurface = false;
-        }
-        if (glints) {
-          const DVec3 g = glintSum(scene, integrator, settings, x, y, glintPerSample, 0, settings.spp, bad);
-          sum += g;
-          aovs.addTo(pixel, Aov::Emitted, g);
-        }
-        const DVec3 spp(settings.spp);
-        // With the filter: all but the split-off indirect light now, that after the filter.
-        result.image.at(x, y) = Vec3(sum / spp);
-        if (!split) continue;
-        ib.indirect[pixel] = Vec3(indirectSum / spp);
-        if (seen > 0) modulation[pixel] = Vec3(albedoSum / double(seen));
-        if (seen > 0 && oneSurface) {
-          ib.position[pixel] = Vec3(positionSum / double(seen));
-          ib.normal[pixel] = first.normal;
-          ib.material[pixel] = first.material;
-          ib.footprint[pixel] = std::max(1e-30f, pixelAngle * glm::length(ib.position[pixel] - scene.camera.position()));
-          ib.filterable[pixel] = 1u;
-        } else if (seen > 0) {
-          tileEdges[size_t(tile)].insert(tileEdges[size_t(tile)].end(), pixelSamples.begin(), pixelSamples.end());
-        }
-      }
-    invalid += bad;
-    if (progress) progress->advance(1);
-  });
-  if (cancelled) throw CancelledError();
-  if (progress) progress->finish();
-  result.stageSeconds["samples"] = timer.seconds();
-  if (split) {
-    Timer stage;
-    // Which pixels run their deferred gathers: one per block on the filter's surfaces, every
-    // pixel off them (the filter keeps those as they are), and any the filter cannot fill.
-    const int spacing = std::max(1, integrator.gatherSpacing());
-    std::vector<uint8_t> gathers(size_t(w) * size_t(h), 1u);
-    ib.estimated.assign(gathers.size(), 1u);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const size_t p = size_t(y) * size_t(w) + size_t(x);
-        if (ib.filterable[p] && !gathersInBlock(x, y, spacing, settings.seed)) gathers[p] = ib.estimated[p] = 0u;
-      }
-    integrator.linkIndirect(ib);
-    uint64_t unfilledCount = 0;
-    if (spacing > 1) {
-      const std::vector<uint8_t> unfilled = unfilledPixels(ib, filterRadius);
-      for (size_t p = 0; p < unfilled.size(); ++p)
-        if (unfilled[p]) {
-          gathers[p] = ib.estimated[p] = 1u;
-          ++unfilledCount;
-        }
-    }
-    // Pixels the filter does not take: where each of their samples on a filterable surface
-    // finds a filter pixel of that surface nearby, the sample takes that pixel's filtered light
-    // and the pixel gathers nothing; any sample without one and the pixel gathers as before.
-    std::vector<EdgeSample> edges;
-    for (const std::vector<EdgeSample>& t : tileEdges) edges.insert(edges.end(), t.begin(), t.end());
-    tileEdges = {};
-    const std::vector<int64_t> from = borrowFrom(integrator, ib, edges);
-    std::vector<uint8_t> borrows(gathers.size(), 0u);
-    for (size_t i = 0; i < edges.size(); ++i) borrows[edges[i].pixel] = 1u;
-    for (size_t i = 0; i < edges.size(); ++i)
-      if (from[i] < 0) borrows[edges[i].pixel] = 0u;
-    uint64_t borrowing = 0;
-    for (size_t p = 0; p < gathers.size(); ++p)
-      if (borrows[p]) {
-        gathers[p] = 0u;
-        ++borrowing;
-      }
-    result.stageSeconds["link"] = stage.seconds();
-    stage.reset();
-    // The gathers to run, in tile order.
-    std::vector<PendingGather> pending;
-    for (std::vector<PendingGather>& t : tilePending) {
-      for (const PendingGather& g : t)
-        if (gathers[g.pixel]) pending.push_back(g);
-      std::vector<PendingGather>().swap(t);
-    }
-    uint64_t filterable = 0, gathering = 0;
-    for (size_t p = 0; p < gathers.size(); ++p) {
-      filterable += ib.filterable[p];
-      gathering += gathers[p];
-    }
-    const uint64_t gathersRun = pending.size();
-    result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", unfilledCount},
-                          {"borrowing", borrowing}, {"gathers", gathersRun}};
-    uint64_t bad = 0;
-    runGathers(integrator, pending, settings.spp, ib, bad, progress);
-    invalid += bad;
-    result.stageSeconds["gather"] = stage.seconds();
-    stage.reset();
-    std::vector<Vec3> indirect = filterIndirect(ib, filterRadius);
-    // The borrowing pixels: each sample's share of its filter pixel's light, in sample order.
-    std::vector<DVec3> borrowed(indirect.size(), DVec3(0.0));
-    for (size_t i = 0; i < edges.size(); ++i)
-      if (borrows[edges[i].pixel]) borrowed[edges[i].pixel] += DVec3(indirect[size_t(from[i])] * edges[i].albedo);
-    for (size_t p = 0; p < indirect.size(); ++p)
-      indirect[p] = borrows[p] ? Vec3(borrowed[p] / double(settings.spp)) : indirect[p] * modulation[p];
-    for (size_t p = 0; p < indirect.size(); ++p) result.image.pixels[p] += indirect[p];
-    result.layers = aovs.layers(settings.spp, &indirect);
-    result.stageSeconds["filter"] = stage.seconds();
-  }
-  result.seconds = timer.seconds();
-  result.samples = static_cast<uint64_t>(w) * h * settings.spp;
-  result.invalidSamples = invalid;
-  return result;
+  if (integrator.indirectFilterRadius() <= 0)
+    return renderPasses(scene, integrator, settings, progress, keepPartial, aovRequest);
+  return FilteredRender(scene, integrator, settings, progress, aovRequest).run();
 }
 
 std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,

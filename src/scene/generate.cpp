@@ -3,7 +3,7 @@
 #include "voxcone/scene/generate.h"
 
 #include "voxcone/core/error.h"
-#include "voxcone/image/image_io.h"
+#include "voxcone/core/file_io.h"
 
 #include <cmath>
 #include <cstring>

@@ -6,7 +6,7 @@
 #include "field_impl.h"
 
 #include "voxcone/core/error.h"
-#include "voxcone/image/image_io.h"
+#include "voxcone/core/file_io.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/io/File.h>

@@ -164,6 +164,33 @@ void VoxelField::inject(const PhotonMaps& photons, Progress* progress) {
   if (progress) progress->finish();
 }
 
+VoxelField VoxelField::build(const Scene& scene, const VoxelSettings& settings, const PhotonMaps& traced,
+                             const PhotonMaps& held, Progress* progress, BuildStats* stats) {
+  Timer t;
+  VoxelField field = voxelize(scene, settings, progress, &traced.caustic);
+  if (stats) {
+    stats->voxelizeSeconds = t.seconds();
+    stats->peakAfterVoxelize = peakRssBytes();
+  }
+  field.relight(held, progress, stats);
+  return field;
+}
+
+void VoxelField::relight(const PhotonMaps& held, Progress* progress, BuildStats* stats) {
+  Timer t;
+  inject(held, progress);
+  if (stats) {
+    stats->injectSeconds = t.seconds();
+    stats->peakAfterInject = peakRssBytes();
+  }
+  t.reset();
+  buildMips(progress);
+  if (stats) {
+    stats->mipsSeconds = t.seconds();
+    stats->peakAfterMips = peakRssBytes();
+  }
+}
+
 void VoxelField::buildMips(Progress* progress) {
   Impl& f = *m_impl;
   for (LevelStack* grid : {&f.main}) {

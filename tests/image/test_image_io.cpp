@@ -2,6 +2,7 @@
 /// sRGB transfer functions, EXR/PNG round trips, atomic writes and read errors.
 
 #include "voxcone/core/error.h"
+#include "voxcone/core/file_io.h"
 #include "voxcone/image/image_io.h"
 
 #include <OpenImageIO/imageio.h>

@@ -12,7 +12,7 @@
 #include "voxcone/core/sampling.h"
 #include "voxcone/image/image_io.h"
 #include "voxcone/image/metrics.h"
-#include "voxcone/integrator/whitted.h"
+#include "voxcone/integrator/direct_light.h"
 #include "voxcone/photon/photon_tracer.h"
 #include "voxcone/scene/environment.h"
 #include "voxcone/scene/mitsuba.h"

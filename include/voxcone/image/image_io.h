@@ -2,7 +2,7 @@
 /// \file image_io.h
 /// Image files (OpenEXR, PNG, JPEG; their libraries kept out of this header), all written
 /// atomically: the data goes to a temporary file in the target's folder which is renamed over
-/// the target, so an interrupted write never leaves a half-written file.
+/// the target (core/file_io.h), so an interrupted write never leaves a half-written file.
 
 #include "voxcone/image/image.h"
 
@@ -17,7 +17,7 @@
 namespace voxcone {
 
 /// Files that appear together or not at all: add() writes each to a temporary beside its path
-/// (the naming of writeFileAtomic); commit() renames them, the one named `last` (the sidecar
+/// (temporaryPathFor, core/file_io.h); commit() renames them, the one named `last` (the sidecar
 /// that marks a set complete) after the others. A failed write throws and leaves nothing; a set
 /// destroyed before commit() removes its temporaries; a rename that fails removes the files
 /// renamed before it. (A process killed between two renames leaves the set without its last
@@ -79,10 +79,6 @@ std::vector<std::optional<Image>> readImageLayers(const std::string& path, const
 
 /// Write pretty JSON (2-space indent) atomically, or as part of `set`. Throws Error.
 void writeJsonAtomic(const std::string& path, const nlohmann::json& value, OutputSet* set = nullptr);
-
-/// Call `writer(tmpPath)` to write a temporary file next to `path` (same extension), then
-/// rename it over `path`. The temporary is removed if `writer` throws. Throws Error.
-void writeFileAtomic(const std::string& path, const std::function<void(const std::string& tmpPath)>& writer);
 
 /// sRGB OETF (IEC 61966-2-1) of a linear value, input clamped to [0,1].
 float linearToSrgb(float linear);

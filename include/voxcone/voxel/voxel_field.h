@@ -186,6 +186,22 @@ public:
   /// The diffuse fraction stays at the finest level only (injection alone reads it).
   void buildMips(Progress* progress = nullptr);
 
+  /// What build() and relight() took: each stage's seconds and the process's peak resident
+  /// set after it (peakRssBytes: its high-water mark so far).
+  struct BuildStats {
+    double voxelizeSeconds = 0.0, injectSeconds = 0.0, mipsSeconds = 0.0;
+    uint64_t peakAfterVoxelize = 0, peakAfterInject = 0, peakAfterMips = 0;
+  };
+  /// The photons-to-field pipeline that `voxcone voxelize` and the voxcone integrator both run:
+  /// voxelize (the caustic grid only where `traced`'s caustic photons land), inject `held` (the
+  /// photons the field is to hold: all of `traced`, or its caustic ones alone where the cones
+  /// read photons, not voxels) and build the mips.
+  static VoxelField build(const Scene& scene, const VoxelSettings& settings, const PhotonMaps& traced,
+                          const PhotonMaps& held, Progress* progress = nullptr, BuildStats* stats = nullptr);
+  /// build()'s last two stages on a field already voxelized: inject `held` (replacing what it
+  /// held) and build the mips again (a progressive render's next pass keeps the voxels).
+  void relight(const PhotonMaps& held, Progress* progress = nullptr, BuildStats* stats = nullptr);
+
   const VoxelSettings& settings() const;
   /// The scene bounds the grid covers (a cube anchored at the scene's lower corner).
   const Bounds3& bounds() const;

@@ -5,7 +5,7 @@
 #include "voxcone/accel/accel.h"
 #include "voxcone/core/error.h"
 #include "voxcone/core/rng.h"
-#include "voxcone/integrator/whitted.h"
+#include "voxcone/integrator/direct_light.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/photon/light_proximity.h"
 #include "voxcone/photon/photon_radiance.h"

@@ -9,8 +9,8 @@
 #include "voxcone/core/sampler.h"
 #include "voxcone/core/sampling.h"
 #include "voxcone/core/timer.h"
+#include "voxcone/integrator/direct_light.h"
 #include "voxcone/integrator/indirect_filter.h"
-#include "voxcone/integrator/whitted.h"
 #include "voxcone/photon/emission_guide.h"
 #include "voxcone/photon/light_proximity.h"
 #include "voxcone/photon/seen_region.h"
@@ -325,31 +325,27 @@ void VoxelConeIntegrator::build(bool keepVoxels, Progress* progress) {
     m_stats["hit_photons_seconds"] = kd.seconds();
   }
   const uint64_t photonPeak = peakRssBytes();
-  Timer t;
-  if (!keepVoxels) {
-    m_tracer.reset();
-    m_field = VoxelField::voxelize(m_scene, m_settings.voxel, progress, &maps.caustic);
-  }
-  m_stats["voxelize_seconds"] = t.seconds();
-  // The process's peak resident set after each stage (its high-water mark so far).
-  nlohmann::json peakAfter = {{"photons", photonPeak}, {"voxelize", peakRssBytes()}};
-  t.reset();
-  if (m_settings.hitGather && m_settings.hitPhotons && m_settings.view != View::Field) {
-    // Cones read no voxel then (their exact hits take the photons): the main grid keeps only
-    // the caustic photons, which the caustic grid's lookups at shading points need.
-    PhotonMaps causticOnly;
-    causticOnly.caustic = maps.caustic;
-    m_field.inject(causticOnly, progress);
+  // Cones whose exact hits take the photons read no voxel: the main grid then keeps only the
+  // caustic photons, which the caustic grid's lookups at shading points need.
+  PhotonMaps causticOnly;
+  const bool conesReadPhotons = m_settings.hitGather && m_settings.hitPhotons && m_settings.view != View::Field;
+  if (conesReadPhotons) causticOnly.caustic = maps.caustic;
+  const PhotonMaps& held = conesReadPhotons ? causticOnly : maps;
+  VoxelField::BuildStats built;
+  if (keepVoxels) {
+    m_field.relight(held, progress, &built);
   } else {
-    m_field.inject(maps, progress);
+    m_tracer.reset();
+    m_field = VoxelField::build(m_scene, m_settings.voxel, maps, held, progress, &built);
   }
-  m_stats["inject_seconds"] = t.seconds();
-  peakAfter["inject"] = peakRssBytes();
-  t.reset();
-  m_field.buildMips(progress);
-  m_stats["mips_seconds"] = t.seconds();
-  peakAfter["mips"] = peakRssBytes();
-  m_stats["peak_rss_bytes_after"] = peakAfter;
+  m_stats["voxelize_seconds"] = built.voxelizeSeconds;
+  m_stats["inject_seconds"] = built.injectSeconds;
+  m_stats["mips_seconds"] = built.mipsSeconds;
+  // The process's peak resident set after each stage (its high-water mark so far).
+  m_stats["peak_rss_bytes_after"] = {{"photons", photonPeak},
+                                     {"voxelize", keepVoxels ? photonPeak : built.peakAfterVoxelize},
+                                     {"inject", built.peakAfterInject},
+                                     {"mips", built.peakAfterMips}};
   m_stats["prepare_seconds"] = total.seconds();
   startTracer();
 }

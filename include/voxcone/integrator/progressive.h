@@ -1,5 +1,5 @@
 #pragma once
-/// \file auto_settings.h
+/// \file progressive.h
 /// `voxcone render --target-error E | --time-budget S`: voxcone rendered in independent passes
 /// until the predicted error meets the target or the budget is spent.
 ///

@@ -1,4 +1,4 @@
-// render --target-error / --time-budget (auto_settings.h): the passes' noise estimate against
+// render --target-error / --time-budget (progressive.h): the passes' noise estimate against
 // independent renders, the control pixels' bias estimate against a bias known from converged
 // images, determinism, the request's errors, and the CLI.
 
@@ -6,7 +6,7 @@
 #include "voxcone/core/error.h"
 #include "voxcone/core/parallel.h"
 #include "voxcone/image/metrics.h"
-#include "voxcone/integrator/auto_settings.h"
+#include "voxcone/integrator/progressive.h"
 #include "voxcone/integrator/integrator.h"
 
 #include "../support/render_helpers.h"
