@@ -545,7 +545,7 @@ void Hbvh::build(const std::vector<Vec3>& positions, const std::vector<UVec3>& t
   // (PrimRef::kInvalid), and the slots are compacted in order only when there is one.
   // They lie in the memory that becomes the tree's block store (m_blocks) once the binary tree
   // is built and their triangle ids are copied out: on these VMs memory a process touches for
-  // the first time costs about 2.5 ms a MB to fault in (README, Benchmarks), and the knot's 320
+  // the first time costs about 2.5 ms a MB to fault in (docs/benchmarks.md), and the knot's 320
   // MB of references were a fifth of its build (3.84-4.01 s, now 3.05-3.30). The store is
   // reserved for 64 bytes a triangle (the dragon's tree takes 51, the knot's 46); a tree that
   // needs more gets fresh memory.

@@ -42,7 +42,7 @@ void MitsubaLoader::parseSensor(const Node& n) {
     if (pf != "rgb" && pf != "rgba") fail(f, "pixel_format '" + pf + "': voxcone writes RGB");
     fp.getString("component_format", "float16");
     // voxcone's only pixel filter is the one-pixel box. Without an rfilter Mitsuba uses a
-    // Gaussian (stddev 0.5 pixel): voxcone renders box then (README says so); an explicit
+    // Gaussian (stddev 0.5 pixel): voxcone renders box then (docs/scenes.md says so); an explicit
     // other filter is an error.
     for (const Node& r : fp.takeObjects("rfilter")) {
       allowAttrs(r, {"type", "id", "name"});
@@ -94,7 +94,7 @@ void MitsubaLoader::parseSensor(const Node& n) {
   if (!(fovYDeg >= 0.01 && fovYDeg <= 179.0))
     fail(n, "vertical field of view " + std::to_string(fovYDeg) + " degrees: voxcone's camera takes [0.01, 179]");
   // voxcone's rays start at the pinhole and have no far limit: near_clip and far_clip only
-  // cut geometry nearer or farther than them in Mitsuba (README says so).
+  // cut geometry nearer or farther than them in Mitsuba (docs/scenes.md says so).
   p.getFloat("near_clip", 0.01f, 0.0f);
   p.getFloat("far_clip", 1e4f, 0.0f);
   bool onlyLookat = false;

@@ -47,7 +47,7 @@ struct HbvhBuildSettings {
   /// child against one SIMD box test for all eight), not a measurement; the trees do not depend
   /// on it much: on the dragon, 1M and 10M knots and 2,000 scattered spheres any cost from 0.2
   /// up keeps at most one sphere (0.05: 573 on the scattered spheres), and by the area rule the
-  /// spheres traced within noise of none (README, Benchmarks).
+  /// spheres traced within noise of none (docs/benchmarks.md).
   float sphereTestCost = 1.0f;
   int parallelThreshold = 4096;  ///< subtrees with fewer triangles are built by one task
   /// Nodes whose subtree holds at most this many triangles keep their children's boxes
@@ -100,7 +100,7 @@ struct HbvhLayout {
   uint64_t outOfBounds = 0;            ///< references past the end of their array
   /// Triangles in the leaves, and the distinct vertex positions of each leaf summed over them,
   /// with the leaves that have more than 16 (what a leaf storing each vertex once would hold; such
-  /// a format, ef5d4fb, saved 30% of the memory and no time: README, Benchmarks).
+  /// a format, ef5d4fb, saved 30% of the memory and no time: docs/benchmarks.md).
   uint64_t leafTriangles = 0, leafDistinctVertices = 0, leavesOver16Vertices = 0;
 };
 

@@ -2,7 +2,7 @@
 /// \file mitsuba.h
 /// Mitsuba 3 XML scenes: the loader (what maps onto voxcone's Scene, with Mitsuba's conventions:
 /// one-sided BSDFs, its camera frame and field-of-view axes, its max_depth), and the writers
-/// that convert between Mitsuba XML and voxcone JSON (`voxcone convert`). README "Mitsuba 3
+/// that convert between Mitsuba XML and voxcone JSON (`voxcone convert`). docs/scenes.md "Mitsuba 3
 /// scenes" lists the plugins and parameters; anything else is a SceneError naming the element,
 /// the file and the line.
 

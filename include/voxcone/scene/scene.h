@@ -268,7 +268,7 @@ private:
 };
 
 /// Load a scene: a Mitsuba 3 XML file when `path` ends in .xml (any case; scene/mitsuba.h),
-/// else voxcone JSON (see README "Scene format"). Relative mesh paths are resolved against the
+/// else voxcone JSON (see docs/scenes.md). Relative mesh paths are resolved against the
 /// scene file's folder. Throws SceneError naming the file and the JSON path or XML line.
 Scene loadScene(const std::string& path);
 /// loadScene with `-D name=value` parameters for a Mitsuba scene (they override its

@@ -14,7 +14,7 @@ namespace voxcone {
 
 namespace {
 /// Defaults chosen by time to error against path at 4096 spp (cornell-box, cornell-dragon and
-/// cornell-dragon-glass, 256x256, 2 threads; the README's "Where voxcone's time goes" has the
+/// cornell-dragon-glass, 256x256, 2 threads; docs/method.md ("Where voxcone's time goes") has the
 /// figures). Level 5: with 10k photons a finer level has fewer photons per voxel. At 4 spp level
 /// 5 / 6 give cornell-box 35.87 / 35.86 dB in 0.11 / 0.13 s, cornell-dragon 36.13 / 35.69 dB, the
 /// glass dragon 31.78 / 30.94 dB (2 spp: 29.73 / 29.09 dB); study levels (dragon, 16 spp) 38.65 /
