@@ -9,6 +9,7 @@
 #include "voxcone/image/film.h"
 #include "voxcone/integrator/indirect_filter.h"
 #include "voxcone/integrator/integrator.h"
+#include "voxcone/integrator/voxel_cone/screen_space_gather.h"
 
 #include <tbb/parallel_for.h>
 
@@ -55,9 +56,9 @@ struct EdgeSample {
 constexpr int kBorrowRadius = 2;
 
 /// For each edge sample, the nearest filterable pixel within kBorrowRadius on its surface
-/// (onFilterSurface) whose point it sees along the surface (Integrator::linkedPoints), or -1.
+/// (onFilterSurface) whose point it sees along the surface (ScreenSpaceGather::linkedPoints), or -1.
 /// Offsets are tried by distance, then row, then column: deterministic.
-std::vector<int64_t> borrowFrom(const Integrator& integrator, const IndirectBuffer& ib,
+std::vector<int64_t> borrowFrom(const ScreenSpaceGather& gather, const IndirectBuffer& ib,
                                 const std::vector<EdgeSample>& edges) {
   std::vector<std::pair<int, int>> offsets;
   for (int dy = -kBorrowRadius; dy <= kBorrowRadius; ++dy)
@@ -77,7 +78,7 @@ std::vector<int64_t> borrowFrom(const Integrator& integrator, const IndirectBuff
       if (!onFilterSurface(ib, q, e.position, e.normal, e.material)) continue;
       // Both ends a quarter of q's footprint above the surface (as linkIndirect's links).
       const float lift = 0.25f * ib.footprint[q];
-      if (!integrator.linkedPoints(e.position + e.normal * lift, ib.position[q] + ib.normal[q] * lift)) continue;
+      if (!gather.linkedPoints(e.position + e.normal * lift, ib.position[q] + ib.normal[q] * lift)) continue;
       from[i] = int64_t(q);
       return;
     }
@@ -98,7 +99,7 @@ bool gathersInBlock(int x, int y, int spacing, uint64_t seed) {
 /// Run the deferred gathers `pending` (in parallel, each on its own), and add each pixel's
 /// weighted gathers, in the list's order, to its indirect light.
 /// Throws CancelledError when `progress` reports cancellation.
-void runGathers(const Integrator& integrator, const std::vector<PendingGather>& pending, int spp, IndirectBuffer& ib,
+void runGathers(const ScreenSpaceGather& gather, const std::vector<PendingGather>& pending, int spp, IndirectBuffer& ib,
                 uint64_t& invalid, Progress* progress) {
   std::vector<Vec3> value(pending.size(), Vec3(0.0f));
   constexpr size_t kChunk = 64;
@@ -112,7 +113,7 @@ void runGathers(const Integrator& integrator, const std::vector<PendingGather>& 
       return;
     }
     for (size_t i = chunk * kChunk; i < std::min(pending.size(), (chunk + 1) * kChunk); ++i)
-      value[i] = pending[i].gather.weight * integrator.gatherDeferred(pending[i].gather);
+      value[i] = pending[i].gather.weight * gather.gatherDeferred(pending[i].gather);
     if (progress) progress->advance(1);
   });
   if (cancelled) throw CancelledError();
@@ -391,17 +392,17 @@ struct GatherPlan {
   uint64_t borrowing = 0;         ///< pixels that borrow
 };
 
-/// renderImage with the indirect filter (Integrator::indirectFilterRadius > 0), in four
+/// renderImage with the indirect filter (ScreenSpaceGather::indirectFilterRadius > 0), in four
 /// stages: every pixel's samples in one pass, the indirect light of filterable first hits split
 /// off into the filter's buffer (samplePixels); which pixels run their deferred gathers and which
 /// edge pixels borrow their light (planGathers: "link"); the gathers ("gather"); the filter and
 /// the borrowed light added to the image ("filter").
 class FilteredRender {
 public:
-  FilteredRender(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,
-                 Progress* progress, const AovRequest* aovRequest)
-      : m_scene(scene), m_integrator(integrator), m_settings(settings), m_progress(progress),
-        m_filterRadius(integrator.indirectFilterRadius()), m_w(settings.width), m_h(settings.height),
+  FilteredRender(const Scene& scene, const Integrator& integrator, const ScreenSpaceGather& gather,
+                 const RenderSettings& settings, Progress* progress, const AovRequest* aovRequest)
+      : m_scene(scene), m_integrator(integrator), m_gather(gather), m_settings(settings), m_progress(progress),
+        m_filterRadius(gather.indirectFilterRadius()), m_w(settings.width), m_h(settings.height),
         m_tilesX((m_w + kTile - 1) / kTile), m_tilesY((m_h + kTile - 1) / kTile),
         m_film(m_w, m_h, aovFilmLayers(aovRequest)), m_aovs(scene, aovRequest),
         m_tilePending(size_t(m_tilesX) * size_t(m_tilesY)), m_tileEdges(m_tilePending.size()) {
@@ -494,7 +495,7 @@ private:
       IndirectSplit sp;
       RadianceTerms terms;
       Vec3 L = m_aovs.terms() || glints ? m_integrator.liTerms(ray, sampler, &sp, terms)
-                                        : m_integrator.liSplit(ray, sampler, sp);
+                                        : m_gather.liSplit(ray, sampler, sp);
       if (glints) leaveOutGlints(L, terms);
       if (!usableRadiance(L) || (sp.valid && !usableRadiance(sp.indirect))) {
         ++bad;
@@ -537,12 +538,12 @@ private:
   }
 
   /// Which pixels run their deferred gathers and which borrow; the filter's links
-  /// (Integrator::linkIndirect) and its estimated pixels set in the buffer.
+  /// (ScreenSpaceGather::linkIndirect) and its estimated pixels set in the buffer.
   GatherPlan planGathers() {
     GatherPlan plan;
     // Which pixels run their deferred gathers: one per block on the filter's surfaces, every
     // pixel off them (the filter keeps those as they are), and any the filter cannot fill.
-    const int spacing = std::max(1, m_integrator.gatherSpacing());
+    const int spacing = std::max(1, m_gather.gatherSpacing());
     plan.gathers.assign(size_t(m_w) * size_t(m_h), 1u);
     m_ib.estimated.assign(plan.gathers.size(), 1u);
     for (int y = 0; y < m_h; ++y)
@@ -550,7 +551,7 @@ private:
         const size_t p = size_t(y) * size_t(m_w) + size_t(x);
         if (m_ib.filterable[p] && !gathersInBlock(x, y, spacing, m_settings.seed)) plan.gathers[p] = m_ib.estimated[p] = 0u;
       }
-    m_integrator.linkIndirect(m_ib);
+    m_gather.linkIndirect(m_ib);
     if (spacing > 1) {
       const std::vector<uint8_t> unfilled = unfilledPixels(m_ib, m_filterRadius);
       for (size_t p = 0; p < unfilled.size(); ++p)
@@ -564,7 +565,7 @@ private:
     // and the pixel gathers nothing; any sample without one and the pixel gathers as before.
     for (const std::vector<EdgeSample>& t : m_tileEdges) plan.edges.insert(plan.edges.end(), t.begin(), t.end());
     m_tileEdges = {};
-    plan.from = borrowFrom(m_integrator, m_ib, plan.edges);
+    plan.from = borrowFrom(m_gather, m_ib, plan.edges);
     plan.borrows.assign(plan.gathers.size(), 0u);
     for (size_t i = 0; i < plan.edges.size(); ++i) plan.borrows[plan.edges[i].pixel] = 1u;
     for (size_t i = 0; i < plan.edges.size(); ++i)
@@ -595,7 +596,7 @@ private:
     result.filterStats = {{"filterable", filterable}, {"gathering", gathering}, {"unfilled", plan.unfilled},
                           {"borrowing", plan.borrowing}, {"gathers", gathersRun}};
     uint64_t bad = 0;
-    runGathers(m_integrator, pending, m_settings.spp, m_ib, bad, m_progress);
+    runGathers(m_gather, pending, m_settings.spp, m_ib, bad, m_progress);
     m_invalid += bad;
   }
 
@@ -622,6 +623,7 @@ private:
 
   const Scene& m_scene;
   const Integrator& m_integrator;
+  const ScreenSpaceGather& m_gather;
   const RenderSettings& m_settings;
   Progress* m_progress;
   const int m_filterRadius;
@@ -639,8 +641,6 @@ private:
 
 }  // namespace
 
-void Integrator::linkIndirect(IndirectBuffer& buffer) const { buffer.link.assign(buffer.indirect.size(), 0u); }
-
 Vec3 Integrator::liTerms(const Ray&, Sampler&, IndirectSplit*, RadianceTerms&) const {
   throw Error(name() + " does not separate its terms");
 }
@@ -653,9 +653,10 @@ RenderResult renderImage(const Scene& scene, const Integrator& integrator, const
     if (!aovRequest->accel) throw Error("renderImage: AOVs without an accelerator");
     checkAovs(integrator, aovRequest->layers);
   }
-  if (integrator.indirectFilterRadius() <= 0)
+  const ScreenSpaceGather* gather = integrator.screenSpaceGather();
+  if (!gather || gather->indirectFilterRadius() <= 0)
     return renderPasses(scene, integrator, settings, progress, keepPartial, aovRequest);
-  return FilteredRender(scene, integrator, settings, progress, aovRequest).run();
+  return FilteredRender(scene, integrator, *gather, settings, progress, aovRequest).run();
 }
 
 std::vector<PixelSamples> renderPixels(const Scene& scene, const Integrator& integrator, const RenderSettings& settings,

@@ -18,33 +18,8 @@
 namespace voxcone {
 
 class Accel;
-struct IndirectBuffer;
-
-/// An indirect-light estimate at a sample's first hit that liSplit leaves for later
-/// (Integrator::gatherDeferred): renderImage runs it only at the pixels that need it.
-struct DeferredGather {
-  SurfaceHit hit;        ///< the first hit
-  Vec3 wo{0.0f};         ///< unit, towards the viewer, world space
-  float u = 0.0f;        ///< the sample's random number for the estimate (voxcone: the cones' turn)
-  float weight = 0.0f;   ///< the estimate's weight in the sample (voxcone: spp / gathers, or 1)
-};
-
-/// What one sample's first surface hands to the screen-space filter of indirect light
-/// (Integrator::liSplit, renderImage).
-struct IndirectSplit {
-  Vec3 indirect{0.0f};   ///< the filterable part of the sample's radiance (not in liSplit's return)
-  Vec3 position{0.0f};   ///< the first hit, world space
-  Vec3 normal{0.0f};     ///< its unit geometric normal on the viewer's side
-  uint32_t material = 0;
-  /// What the filterable light is multiplied by after the filter: a textured albedo at the hit
-  /// (the light is estimated without it, so that the filter does not blur the texture), else 1.
-  Vec3 albedo{1.0f};
-  bool valid = false;    ///< the first hit is a surface whose indirect light is filterable
-  /// The sample's filterable indirect light is `gather`'s estimate (gatherDeferred) rather
-  /// than `indirect`.
-  bool deferred = false;
-  DeferredGather gather;
-};
+class ScreenSpaceGather;
+struct IndirectSplit;
 
 /// What a camera sample's radiance is made of (the term AOVs), each term weighted by the
 /// throughput of the delta (mirror, glass) chain that reached it, so that emitted + direct +
@@ -71,30 +46,15 @@ public:
   /// Radiance along `ray` (a camera ray); `sampler` is this pixel's sample source, at the
   /// current sample (core/sampler.h).
   virtual Vec3 li(const Ray& ray, Sampler& sampler) const = 0;
-  /// Radius in pixels of the screen-space filter renderImage applies to the indirect light
-  /// liSplit separates (0: no filter, renderImage calls li).
-  virtual int indirectFilterRadius() const { return 0; }
-  /// li, except that the indirect light of a filterable first hit goes into `split` (with the
-  /// hit's position, normal and material) instead of the return value.
-  virtual Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const { return li(ray, sampler); }
-  /// The weighted indirect-light estimate of a gather liSplit deferred (split.deferred).
-  virtual Vec3 gatherDeferred(const DeferredGather& gather) const { return Vec3(0.0f); }
-  /// Spacing in pixels of the pixels whose deferred gathers renderImage runs: one pixel in each
-  /// spacing x spacing block, plus every pixel the filter cannot fill from its neighbours
-  /// (1: every pixel).
-  virtual int gatherSpacing() const { return 1; }
-  /// Fill buffer.link (indirect_filter.h) before the filter runs: which adjacent pixels' points
-  /// see each other. The default links none, so the filter keeps every pixel's own value.
-  virtual void linkIndirect(IndirectBuffer& buffer) const;
-  /// Whether nothing lies on the segment from `from` to `to` (two points just above one
-  /// surface): the test behind linkIndirect's links, also used for the samples of pixels the
-  /// filter does not take. The default knows of no links.
-  virtual bool linkedPoints(const Vec3& from, const Vec3& to) const { return false; }
+  /// The screen-space gather protocol renderImage follows where the integrator has one
+  /// (voxcone: integrator/voxel_cone/screen_space_gather.h): deferred gathers at some pixels and
+  /// a filter of their indirect light; none (null) renders every sample whole.
+  virtual const ScreenSpaceGather* screenSpaceGather() const { return nullptr; }
   /// Whether liTerms separates this integrator's terms (RadianceTerms).
   virtual bool separatesTerms() const { return false; }
-  /// li (split null) or liSplit (split given), the same estimate from the same samples, with
-  /// its terms added to `terms` (what liSplit splits off stays out of both). Throws Error
-  /// unless separatesTerms().
+  /// li (split null) or ScreenSpaceGather::liSplit (split given), the same estimate from the
+  /// same samples, with its terms added to `terms` (what liSplit splits off stays out of both).
+  /// Throws Error unless separatesTerms().
   virtual Vec3 liTerms(const Ray& ray, Sampler& sampler, IndirectSplit* split, RadianceTerms& terms) const;
   /// Extra samples, per camera sample, of the light seen through mirrors and glass (0: none).
   /// renderImage takes them in the pixels where glintsVary says so for the pixel's fixed probe

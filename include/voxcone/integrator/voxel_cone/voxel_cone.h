@@ -150,6 +150,7 @@
 #include "voxcone/integrator/integrator.h"
 #include "voxcone/integrator/voxel_cone/cone_set.h"
 #include "voxcone/integrator/voxel_cone/cone_tracer.h"
+#include "voxcone/integrator/voxel_cone/screen_space_gather.h"
 #include "voxcone/integrator/voxel_cone/settings.h"
 #include "voxcone/voxel/voxel_field.h"
 
@@ -160,7 +161,7 @@ namespace voxcone {
 
 class LightProximity;
 
-class VoxelConeIntegrator final : public Integrator {
+class VoxelConeIntegrator final : public Integrator, public ScreenSpaceGather {
 public:
   explicit VoxelConeIntegrator(const IntegratorContext& context);
   std::string name() const override { return "voxcone"; }
@@ -172,6 +173,7 @@ public:
   void reseed(uint64_t photonSeed, Progress* progress);
   const VoxelConeSettings& settings() const { return m_settings; }
   Vec3 li(const Ray& ray, Sampler& sampler) const override;
+  const ScreenSpaceGather* screenSpaceGather() const override { return this; }
   int indirectFilterRadius() const override { return m_settings.filterRadius; }
   Vec3 liSplit(const Ray& ray, Sampler& sampler, IndirectSplit& split) const override;
   bool separatesTerms() const override { return true; }
