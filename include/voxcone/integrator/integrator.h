@@ -140,16 +140,17 @@ struct RenderResult {
 /// Render with tiles of 16x16 pixels in parallel (TBB). Pixel (x, y) draws its samples from
 /// Sampler(settings.sampler, settings.seed, y * width + x), sample s starting at dimension 0,
 /// its first slot the jitter, so the image is bit-identical at any thread count.
-/// Box pixel filter: each sample is uniform in the pixel's square. With an indirect filter
-/// radius, each pixel's indirect light (liSplit) is replaced by its neighbours' weighted mean
-/// where all its samples saw one surface (filterIndirect, deterministic). A pixel whose
-/// samples saw several surfaces (an edge) takes, per sample, the filtered light of the nearest
-/// filter pixel within 2 pixels on that sample's surface that its point sees
-/// (Integrator::linkedPoints), when every one of its samples finds one. Deferred gathers
-/// (IndirectSplit::deferred) run after every pixel's samples, at one pixel per
-/// gatherSpacing() block (chosen per block from the seed), at every edge pixel that cannot take
-/// its light that way, and at every pixel with no gathering pixel among its filter
-/// neighbours; the filter then fills the others from their neighbours.
+/// Box pixel filter: each sample is uniform in the pixel's square. For an integrator with a
+/// screen-space gather (Integrator::screenSpaceGather) of indirect filter radius > 0, each pixel's
+/// indirect light (ScreenSpaceGather::liSplit) is replaced by its neighbours' weighted mean where
+/// all its samples saw one surface (filterIndirect, deterministic). A pixel whose samples saw
+/// several surfaces (an edge) takes, per sample, the filtered light of the nearest filter pixel
+/// within 2 pixels on that sample's surface that its point sees (ScreenSpaceGather::linkedPoints),
+/// when every one of its samples finds one. Deferred gathers (IndirectSplit::deferred) run after
+/// every pixel's samples, at one pixel per ScreenSpaceGather::gatherSpacing() block (chosen per
+/// block from the seed), at every edge pixel that cannot take its light that way, and at every
+/// pixel with no gathering pixel among its filter neighbours; the filter then fills the others from
+/// their neighbours.
 /// Without the indirect filter the samples are taken in passes over all pixels (1, 1, 2, 4, ...
 /// up to 64 samples each; the image is the same bit for bit): cancellation is seen within a
 /// fraction of a second at any spp, and with `keepPartial` the render then returns the passes
