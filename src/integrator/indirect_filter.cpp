@@ -19,13 +19,12 @@ constexpr float kMinNormalCos = 0.9f;
 /// test (indirect_filter tests) needs it below 3.
 constexpr float kPlaneFootprints = 2.0f;
 /// surfaceReach looks past at most this many pixels in a row that see more than one surface
-/// (an edge's) for the surface beyond them.
+/// (an edge's) for the surface beyond them. An edge crossing a row or column of box-filtered
+/// pixels lies inside one of them; a walk along a diagonal can meet two (the edge passes
+/// between the pixel's corner and its neighbour's). A third in a row is a gap, not an edge:
+/// what lies beyond it need not meet the pixel's surface (the test's three-pixel case).
 constexpr int kEdgePixels = 2;
-}  // namespace
 
-namespace {
-/// The normals' cosine when a point (position, unit normal, material) lies on filterable pixel
-/// p's surface by the filter's tests, else -2.
 /// Whether a point (position, unit normal) lies on pixel p's plane: normals within 25 degrees,
 /// within kPlaneFootprints of p's footprints of its tangent plane.
 bool onPlane(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal) {
@@ -33,6 +32,8 @@ bool onPlane(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec
          std::fabs(glm::dot(in.normal[p], position - in.position[p])) <= kPlaneFootprints * in.footprint[p];
 }
 
+/// The normals' cosine when a point (position, unit normal, material) lies on filterable pixel
+/// p's surface by the filter's tests, else -2.
 float cosOnSurface(const IndirectBuffer& in, size_t p, const Vec3& position, const Vec3& normal, uint32_t material) {
   if (!in.filterable[p] || material != in.material[p] || !onPlane(in, p, position, normal)) return -2.0f;
   return glm::dot(in.normal[p], normal);

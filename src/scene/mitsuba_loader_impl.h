@@ -62,45 +62,6 @@ struct Node {
   std::string tag() const { return xml.name(); }
 };
 
-/// Mitsuba's named indices of refraction (Mitsuba 3 include/mitsuba/render/ior.h, after Hecht,
-/// Optics, 4th ed., at about 589 nm).
-inline const std::map<std::string, float>& iorTable() {
-  static const std::map<std::string, float> table = {
-      {"vacuum", 1.0f},          {"helium", 1.000036f},     {"hydrogen", 1.000132f},
-      {"air", 1.000277f},        {"carbon dioxide", 1.00045f}, {"water", 1.3330f},
-      {"acetone", 1.36f},        {"ethanol", 1.361f},       {"carbon tetrachloride", 1.461f},
-      {"glycerol", 1.4729f},     {"benzene", 1.501f},       {"silicone oil", 1.52045f},
-      {"bromine", 1.661f},       {"water ice", 1.31f},      {"fused quartz", 1.458f},
-      {"pyrex", 1.470f},         {"acrylic glass", 1.49f},  {"polypropylene", 1.49f},
-      {"bk7", 1.5046f},          {"sodium chloride", 1.544f}, {"amber", 1.55f},
-      {"pet", 1.5750f},          {"diamond", 2.419f}};
-  return table;
-}
-
-/// Conductor presets as linear RGB (eta, k). Mitsuba 3 integrates measured spectra at render
-/// time; these are the same spectra (Mitsuba's data/ior) integrated to RGB as published in
-/// Tungsten's ComplexIorData.hpp (B. Bitterli), rounded to 5 digits.
-struct ConductorPreset {
-  Vec3 eta, k;
-};
-inline const std::map<std::string, ConductorPreset>& conductorTable() {
-  static const std::map<std::string, ConductorPreset> table = {
-      {"Ag", {{0.15526f, 0.11672f, 0.13838f}, {4.8283f, 3.1222f, 2.1470f}}},
-      {"Al", {{1.6575f, 0.88037f, 0.52123f}, {9.2239f, 6.2695f, 4.8370f}}},
-      {"Au", {{0.14312f, 0.37496f, 1.4425f}, {3.9832f, 2.3857f, 1.6032f}}},
-      {"Cr", {{4.3697f, 2.9167f, 1.6547f}, {5.2064f, 4.2314f, 3.7549f}}},
-      {"Cu", {{0.20044f, 0.92403f, 1.1022f}, {3.9129f, 2.4528f, 2.1422f}}},
-      {"W", {{4.3707f, 3.3003f, 2.9983f}, {3.5007f, 2.6049f, 2.2732f}}}};
-  return table;
-}
-
-inline std::string trim(const std::string& s) {
-  size_t a = 0, b = s.size();
-  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
-  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
-  return s.substr(a, b - a);
-}
-
 /// Largest absolute component, in double (before any conversion to float).
 inline double largest(const DVec3& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); }
 

@@ -7,6 +7,18 @@
 namespace voxcone {
 namespace mitsuba_xml {
 
+namespace {
+
+/// `s` without leading and trailing white space.
+std::string trim(const std::string& s) {
+  size_t a = 0, b = s.size();
+  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
+  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
+  return s.substr(a, b - a);
+}
+
+}  // namespace
+
 Props::Props(MitsubaLoader& loader, const Node& plugin) : m_loader(loader), m_node(plugin) {
   m_type = loader.attr(plugin, "type");
   for (pugi::xml_node c = plugin.xml.first_child(); c; c = c.next_sibling()) {

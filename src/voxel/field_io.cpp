@@ -20,6 +20,7 @@
 #include <fstream>
 #include <cstdlib>
 #include <functional>
+#include <limits>
 #include <mutex>
 #include <optional>
 
@@ -80,12 +81,23 @@ public:
 
   void writeBuffers(std::ostream& os) const override {
     IndexAccessor index(*m_level.tree);
+    // The voxels of a leaf come z fastest, four to a brick row: the brick is looked up once for
+    // them (every active voxel is the level's, so it is inside it).
+    int64_t brick = -1;
+    openvdb::Coord brickCoord(std::numeric_limits<int32_t>::min());
     for (auto it = this->tree().cbeginLeaf(); it; ++it) {
       LeafT leaf(it->origin(), this->background(), false);
       for (auto on = it->getValueMask().beginOn(); on; ++on) {
         const openvdb::Coord c = it->offsetToGlobalCoord(on.pos());
+        const openvdb::Coord b(c.x() >> 2, c.y() >> 2, c.z() >> 2);
+        if (b != brickCoord) {
+          brickCoord = b;
+          brick = m_level.brickAt(b.x(), b.y(), b.z(), index);
+        }
         VoxelRef r{};
-        if (m_level.find(c.x(), c.y(), c.z(), index, r)) leaf.setValueOn(on.pos(), m_value(r));
+        // Made again here, as the mask was made from them: the grid keeps no values.
+        if (brick >= 0 && m_level.voxelIn(uint32_t(brick), uint32_t(c.x()), uint32_t(c.y()), uint32_t(c.z()), r))
+          leaf.setValueOn(on.pos(), m_value(r));
       }
       leaf.writeBuffers(os, this->saveFloatAsHalf());
     }
